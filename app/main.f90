@@ -1,0 +1,201 @@
+!> The `anm` command: parses the command line, calls the library and turns errors into messages
+!> and exit codes. See `anm --help` and docs/user-guide.md.
+program anm
+   use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use anm_core_kinds, only: wp, i8
+   use anm_core_error, only: error_type, fatal_error, error_code
+   use anm_core_strings, only: to_string
+   use anm_core_filesystem, only: join_path
+   use anm_shapes_library, only: shape_set_type, load_shapes, synthetic_shapes
+   use anm_shapes_synthetic, only: synthetic_params_type
+   use anm_shapes_nist, only: write_nist_shape
+   use anm_geometry_properties, only: shape_geometry_type, compute_geometry
+   use anm_cli_shape_table, only: write_geometry_header, write_geometry_row
+   implicit none
+
+   character(len=*), parameter :: version = "0.1.0"
+   character(len=:), allocatable :: command
+   type(error_type), allocatable :: error
+
+   if (command_argument_count() < 1) then
+      call usage(error_unit)
+      call exit(2)
+   end if
+   command = argument(1)
+   select case (command)
+   case ("-h", "--help", "help")
+      call usage(output_unit)
+   case ("--version")
+      write (output_unit, '(a)') "anm "//version
+   case ("shape")
+      call run_shape(error)
+   case ("synth")
+      call run_synth(error)
+   case default
+      call fatal_error(error, "unknown command '"//command//"' (try: anm --help)", error_code%value)
+   end select
+   if (allocated(error)) then
+      write (error_unit, '(a)') "anm: error: "//error%message
+      call exit(1)
+   end if
+
+contains
+
+   subroutine usage(unit)
+      integer, intent(in) :: unit
+      write (unit, '(a)') &
+         "usage: anm COMMAND [ARGS]", &
+         "", &
+         "commands:", &
+         "  shape FILE|DIR [--order N] [--next N]", &
+         "        geometry table (NIST columns) of one coefficient file or of every *.dat in DIR,", &
+         "        computed at expansion order N (default: all coefficients); --next N uses the", &
+         "        thesis' extent scan with N angles instead of the refined extents", &
+         "  synth DIR [--count N] [--seed S] [--order N]", &
+         "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
+         "        coefficient files DIR/synthetic-anm-NNNNN.dat", &
+         "  --help, --version", &
+         "", &
+         "Environment: OMP_NUM_THREADS sets the number of threads."
+   end subroutine usage
+
+   function argument(i) result(arg)
+      integer, intent(in) :: i
+      character(len=:), allocatable :: arg
+      integer :: length
+      call get_command_argument(i, length=length)
+      allocate (character(len=length) :: arg)
+      if (length > 0) call get_command_argument(i, arg)
+   end function argument
+
+   !> Integer value of option `name` at argument position i+1.
+   subroutine int_option(i, name, val, error)
+      integer, intent(inout) :: i
+      character(len=*), intent(in) :: name
+      integer, intent(out) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer :: stat
+      character(len=:), allocatable :: text
+      if (i + 1 > command_argument_count()) then
+         call fatal_error(error, "option "//name//" needs a value", error_code%value)
+         return
+      end if
+      text = argument(i + 1)
+      read (text, *, iostat=stat) val
+      if (stat /= 0 .or. verify(trim(text), "+-0123456789") /= 0) then
+         call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
+         return
+      end if
+      i = i + 1
+   end subroutine int_option
+
+   subroutine run_shape(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: path, arg
+      integer :: i, order, next, k
+      type(shape_set_type) :: set
+      type(shape_geometry_type), allocatable :: geom(:)
+
+      order = -1
+      next = -1
+      i = 2
+      do while (i <= command_argument_count())
+         arg = argument(i)
+         select case (arg)
+         case ("--order")
+            call int_option(i, "--order", order, error)
+            if (allocated(error)) return
+            if (order < 0) then
+               call fatal_error(error, "option --order: "//to_string(order)//" must be >= 0", error_code%value)
+               return
+            end if
+         case ("--next")
+            call int_option(i, "--next", next, error)
+            if (allocated(error)) return
+            if (next < 2) then
+               call fatal_error(error, "option --next: "//to_string(next)//" must be >= 2", error_code%value)
+               return
+            end if
+         case default
+            if (arg(1:min(1, len(arg))) == "-") then
+               call fatal_error(error, "anm shape: unknown option '"//arg//"'", error_code%value)
+               return
+            end if
+            if (allocated(path)) then
+               call fatal_error(error, "anm shape: more than one path given ('"//path//"', '"//arg//"')", &
+                                error_code%value)
+               return
+            end if
+            path = arg
+         end select
+         i = i + 1
+      end do
+      if (.not. allocated(path)) then
+         call fatal_error(error, "anm shape: missing FILE or DIR argument", error_code%value)
+         return
+      end if
+      call load_shapes(path, set, error)
+      if (allocated(error)) return
+      allocate (geom(size(set%shapes)))
+      !$omp parallel do default(none) shared(set, geom, order, next) private(k) schedule(dynamic)
+      do k = 1, size(set%shapes)
+         if (order >= 0 .and. next >= 2) then
+            call compute_geometry(set%shapes(k), geom(k), nused=order, next=next)
+         else if (order >= 0) then
+            call compute_geometry(set%shapes(k), geom(k), nused=order)
+         else if (next >= 2) then
+            call compute_geometry(set%shapes(k), geom(k), next=next)
+         else
+            call compute_geometry(set%shapes(k), geom(k))
+         end if
+      end do
+      !$omp end parallel do
+      call write_geometry_header(output_unit)
+      do k = 1, size(set%shapes)
+         call write_geometry_row(output_unit, set%names(k)%s, geom(k))
+      end do
+   end subroutine run_shape
+
+   subroutine run_synth(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: dir, arg
+      integer :: i, count, seed, k
+      type(synthetic_params_type) :: par
+      type(shape_set_type) :: set
+
+      count = 24
+      seed = 1
+      i = 2
+      do while (i <= command_argument_count())
+         arg = argument(i)
+         select case (arg)
+         case ("--count")
+            call int_option(i, "--count", count, error)
+         case ("--seed")
+            call int_option(i, "--seed", seed, error)
+         case ("--order")
+            call int_option(i, "--order", par%nmax, error)
+         case default
+            if (arg(1:min(1, len(arg))) == "-") then
+               call fatal_error(error, "anm synth: unknown option '"//arg//"'", error_code%value)
+               return
+            end if
+            dir = arg
+         end select
+         if (allocated(error)) return
+         i = i + 1
+      end do
+      if (.not. allocated(dir)) then
+         call fatal_error(error, "anm synth: missing output DIR argument", error_code%value)
+         return
+      end if
+      call synthetic_shapes(par, int(seed, i8), count, set, error)
+      if (allocated(error)) return
+      call execute_command_line("mkdir -p '"//dir//"'")
+      do k = 1, count
+         call write_nist_shape(join_path(dir, set%names(k)%s), set%shapes(k), error)
+         if (allocated(error)) return
+      end do
+      write (output_unit, '(a)') "wrote "//to_string(count)//" synthetic shapes to "//dir
+   end subroutine run_synth
+end program anm

@@ -1,0 +1,277 @@
+!> Real spherical-harmonic expansions r(theta, phi) of star-shaped particle surfaces.
+!>
+!> The file convention (DESIGN.md) is r = Re sum_{n,m} a_nm Y_n^m with complex orthonormal
+!> Y_n^m (Condon-Shortley phase). Internally the expansion is stored in real form,
+!>     r = sum_n sum_{m=0..n} Pbar_n^m(cos theta) (A_nm cos(m phi) + B_nm sin(m phi)),
+!> with A_n0 = Re a_n0 and, for m > 0, A_nm = Re a_nm + (-1)^m Re a_{n,-m},
+!> B_nm = -Im a_nm + (-1)^m Im a_{n,-m}. For the conjugate-symmetric files NIST writes
+!> (a_{n,-m} = (-1)^m conj a_nm) this is A = 2 Re a_nm, B = -2 Im a_nm.
+!>
+!> Evaluation at a single direction sums over n per order m (a fused column recursion, no
+!> storage), then over m with cos(m phi), sin(m phi) from the Chebyshev recurrence: no
+!> trigonometric call per term.
+!>
+!> Usage:
+!>     call new_sh_expansion(shape, coeff, nmax)     ! coeff(0:nmax, -nmax:nmax) complex
+!>     r = shape%radius_dir([ux, uy, uz])           ! unit direction, body frame
+!>     call shape%point(theta, phi, r, r_theta, r_phi_sin)
+module anm_sh_expansion
+   use anm_core_kinds, only: wp
+   use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, &
+      & legendre_theta_derivatives, packed_size
+   implicit none
+   private
+
+   public :: sh_expansion_type, new_sh_expansion, new_sh_expansion_real, sh_truncate, &
+      & sh_to_complex, surface_normal
+
+   !> A real SH expansion of degree nmax (immutable after construction; safe to share between
+   !> threads).
+   type :: sh_expansion_type
+      !> Highest degree stored.
+      integer :: nmax = -1
+      !> Cosine coefficients A(n, m), 0 <= m <= n <= nmax (entries with m > n are zero).
+      real(wp), allocatable :: a(:, :)
+      !> Sine coefficients B(n, m).
+      real(wp), allocatable :: b(:, :)
+      !> Legendre recursion table of degree nmax + 1 (for values and derivatives).
+      type(legendre_table_type) :: table
+   contains
+      !> r along a unit direction (body frame).
+      procedure :: radius_dir
+      !> r at (theta, phi).
+      procedure :: radius
+      !> r and its angular derivatives at (theta, phi).
+      procedure :: point
+      !> Mean radius a_00 / (2 sqrt(pi)).
+      procedure :: mean_radius
+   end type sh_expansion_type
+
+contains
+
+   !> Build an expansion from complex coefficients c(n, m), n = 0..nmax, m = -n..n
+   !> (entries with |m| > n are ignored).
+   pure subroutine new_sh_expansion(self, coeff, nmax)
+      !> Expansion to build.
+      type(sh_expansion_type), intent(out) :: self
+      !> Complex coefficients a_nm, dimension (0:nmax, -nmax:nmax).
+      complex(wp), intent(in) :: coeff(0:, -nmax:)
+      !> Highest degree.
+      integer, intent(in) :: nmax
+      real(wp), allocatable :: a(:, :), b(:, :)
+      integer :: n, m
+      real(wp) :: sgn
+
+      allocate (a(0:nmax, 0:nmax), b(0:nmax, 0:nmax))
+      a = 0.0_wp
+      b = 0.0_wp
+      do n = 0, nmax
+         a(n, 0) = real(coeff(n, 0), wp)
+         do m = 1, n
+            sgn = merge(-1.0_wp, 1.0_wp, mod(m, 2) == 1)
+            a(n, m) = real(coeff(n, m), wp) + sgn * real(coeff(n, -m), wp)
+            b(n, m) = -aimag(coeff(n, m)) + sgn * aimag(coeff(n, -m))
+         end do
+      end do
+      call new_sh_expansion_real(self, a, b)
+   end subroutine new_sh_expansion
+
+   !> Build an expansion from real-form coefficients A(0:nmax, 0:nmax), B(0:nmax, 0:nmax).
+   pure subroutine new_sh_expansion_real(self, a, b)
+      !> Expansion to build.
+      type(sh_expansion_type), intent(out) :: self
+      !> Cosine and sine coefficients indexed (n, m).
+      real(wp), intent(in) :: a(0:, 0:), b(0:, 0:)
+      integer :: n, m
+
+      self%nmax = ubound(a, 1)
+      allocate (self%a(0:self%nmax, 0:self%nmax), self%b(0:self%nmax, 0:self%nmax))
+      self%a = 0.0_wp
+      self%b = 0.0_wp
+      do m = 0, self%nmax
+         do n = m, self%nmax
+            self%a(n, m) = a(n, m)
+            if (m > 0) self%b(n, m) = b(n, m)
+         end do
+      end do
+      self%table = new_legendre_table(self%nmax + 1)
+   end subroutine new_sh_expansion_real
+
+   !> Copy of `shape` truncated to degree nused (nused >= nmax returns a full copy).
+   pure function sh_truncate(shape, nused) result(trunc)
+      !> Full expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      !> Degree to keep.
+      integer, intent(in) :: nused
+      type(sh_expansion_type) :: trunc
+      integer :: nu
+      nu = max(0, min(nused, shape%nmax))
+      call new_sh_expansion_real(trunc, shape%a(0:nu, 0:nu), shape%b(0:nu, 0:nu))
+   end function sh_truncate
+
+   !> Complex coefficients (conjugate-symmetric form) in the NIST layout c(0:nmax, -nmax:nmax).
+   pure function sh_to_complex(shape) result(coeff)
+      !> Expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      complex(wp), allocatable :: coeff(:, :)
+      integer :: n, m
+      real(wp) :: sgn
+      allocate (coeff(0:shape%nmax, -shape%nmax:shape%nmax))
+      coeff = (0.0_wp, 0.0_wp)
+      do n = 0, shape%nmax
+         coeff(n, 0) = cmplx(shape%a(n, 0), 0.0_wp, wp)
+         do m = 1, n
+            sgn = merge(-1.0_wp, 1.0_wp, mod(m, 2) == 1)
+            coeff(n, m) = cmplx(0.5_wp * shape%a(n, m), -0.5_wp * shape%b(n, m), wp)
+            coeff(n, -m) = sgn * conjg(coeff(n, m))
+         end do
+      end do
+   end function sh_to_complex
+
+   !> Mean radius over the sphere, a_00 / (2 sqrt(pi)).
+   pure function mean_radius(self) result(rbar)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      real(wp) :: rbar
+      rbar = self%a(0, 0) * 0.5_wp / sqrt(acos(-1.0_wp))
+   end function mean_radius
+
+   !> r along the unit direction u = (sin t cos p, sin t sin p, cos t) in the body frame.
+   !> This is the contact-test hot path: a fused recursion of O(nmax^2) multiply-adds.
+   pure function radius_dir(self, u) result(r)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Unit direction (need not be exactly normalised; it is normalised here).
+      real(wp), intent(in) :: u(3)
+      real(wp) :: r
+      real(wp) :: rho, len, x, s, cp, sp
+      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
+      rho = sqrt(u(1)**2 + u(2)**2)
+      x = u(3) / len
+      s = rho / len
+      if (rho > 0.0_wp) then
+         cp = u(1) / rho
+         sp = u(2) / rho
+      else
+         cp = 1.0_wp
+         sp = 0.0_wp
+      end if
+      r = radius_xs(self, x, s, cp, sp)
+   end function radius_dir
+
+   !> r at polar angle theta and azimuth phi (radians).
+   pure function radius(self, theta, phi) result(r)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Polar angle and azimuth.
+      real(wp), intent(in) :: theta, phi
+      real(wp) :: r
+      r = radius_xs(self, cos(theta), abs(sin(theta)), cos(phi), sin(phi))
+   end function radius
+
+   !> Fused evaluation from cos/sin of theta and phi. Columns whose sectoral seed has fallen below
+   !> 1e-250 are skipped: their contribution is below 1e-150 of r for any degree <= 100.
+   pure function radius_xs(self, x, s, cp, sp) result(r)
+      type(sh_expansion_type), intent(in) :: self
+      real(wp), intent(in) :: x, s, cp, sp
+      real(wp) :: r
+      real(wp) :: pmm, v0, v1, v2, cm, sm, cnew, acc_a, acc_b
+      integer :: m, n, k0, nmax
+      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+
+      nmax = self%nmax
+      pmm = inv_sqrt_4pi
+      cm = 1.0_wp   ! cos(m phi)
+      sm = 0.0_wp   ! sin(m phi)
+      r = 0.0_wp
+      do m = 0, nmax
+         if (m > 0) then
+            pmm = -self%table%sect(m) * s * pmm
+            if (abs(pmm) < 1.0e-250_wp) exit
+            cnew = cm * cp - sm * sp
+            sm = sm * cp + cm * sp
+            cm = cnew
+         end if
+         k0 = self%table%idx(m)
+         v1 = pmm
+         acc_a = self%a(m, m) * v1
+         acc_b = self%b(m, m) * v1
+         if (m < nmax) then
+            v0 = v1
+            v1 = self%table%ca(k0 + 1) * x * v0
+            acc_a = acc_a + self%a(m + 1, m) * v1
+            acc_b = acc_b + self%b(m + 1, m) * v1
+            do n = m + 2, nmax
+               v2 = self%table%ca(k0 + n - m) * x * v1 - self%table%cb(k0 + n - m) * v0
+               v0 = v1
+               v1 = v2
+               acc_a = acc_a + self%a(n, m) * v1
+               acc_b = acc_b + self%b(n, m) * v1
+            end do
+         end if
+         r = r + acc_a * cm + acc_b * sm
+      end do
+   end function radius_xs
+
+   !> r and its angular derivatives at (theta, phi): r_theta = dr/dtheta and
+   !> r_phi_sin = (dr/dphi) / sin(theta), the latter finite at the poles.
+   pure subroutine point(self, theta, phi, r, r_theta, r_phi_sin)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Polar angle and azimuth (radians).
+      real(wp), intent(in) :: theta, phi
+      !> Radius.
+      real(wp), intent(out) :: r
+      !> dr/dtheta.
+      real(wp), intent(out) :: r_theta
+      !> (dr/dphi) / sin(theta).
+      real(wp), intent(out) :: r_phi_sin
+      real(wp), allocatable :: p(:), dp(:), mps(:)
+      integer, allocatable :: idx_out(:)
+      integer :: n, m, k, nmax
+      real(wp) :: cm, sm
+
+      nmax = self%nmax
+      allocate (p(packed_size(nmax + 1)), dp(packed_size(nmax)), mps(packed_size(nmax)))
+      allocate (idx_out(0:nmax))
+      k = 1
+      do m = 0, nmax
+         idx_out(m) = k
+         k = k + nmax - m + 1
+      end do
+      call legendre_values(self%table, cos(theta), p, abs(sin(theta)))
+      call legendre_theta_derivatives(self%table, p, nmax, idx_out, dp, mps)
+      r = 0.0_wp
+      r_theta = 0.0_wp
+      r_phi_sin = 0.0_wp
+      do m = 0, nmax
+         cm = cos(m * phi)
+         sm = sin(m * phi)
+         do n = m, nmax
+            r = r + p(self%table%idx(m) + n - m) * (self%a(n, m) * cm + self%b(n, m) * sm)
+            r_theta = r_theta + dp(idx_out(m) + n - m) * (self%a(n, m) * cm + self%b(n, m) * sm)
+            r_phi_sin = r_phi_sin + mps(idx_out(m) + n - m) * (self%b(n, m) * cm - self%a(n, m) * sm)
+         end do
+      end do
+   end subroutine point
+
+   !> Outward unit normal (Cartesian, body frame) of the surface r(theta, phi) from r and its
+   !> angular derivatives: n ~ r rhat - r_theta thetahat - r_phi_sin phihat.
+   pure function surface_normal(theta, phi, r, r_theta, r_phi_sin) result(nrm)
+      !> Direction of the surface point.
+      real(wp), intent(in) :: theta, phi
+      !> r, dr/dtheta, (dr/dphi)/sin(theta) at that direction.
+      real(wp), intent(in) :: r, r_theta, r_phi_sin
+      real(wp) :: nrm(3)
+      real(wp) :: st, ct, sp, cp, rh(3), th(3), ph(3)
+      st = sin(theta)
+      ct = cos(theta)
+      sp = sin(phi)
+      cp = cos(phi)
+      rh = [st * cp, st * sp, ct]
+      th = [ct * cp, ct * sp, -st]
+      ph = [-sp, cp, 0.0_wp]
+      nrm = r * rh - r_theta * th - r_phi_sin * ph
+      nrm = nrm / sqrt(sum(nrm**2))
+   end function surface_normal
+end module anm_sh_expansion
