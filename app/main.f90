@@ -51,9 +51,11 @@ contains
          "        geometry table (NIST columns) of one coefficient file or of every *.dat in DIR,", &
          "        computed at expansion order N (default: all coefficients); --next N uses the", &
          "        thesis' extent scan with N angles instead of the refined extents", &
-         "  synth DIR [--count N] [--seed S] [--order N]", &
+         "  synth DIR [--count N] [--seed S] [--order N] [--bc-mean X] [--bc-sd X] [--ab-mean X]", &
+         "            [--ab-sd X] [--rough-c X] [--rough-beta X] [--sigma-rough X]", &
          "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
-         "        coefficient files DIR/synthetic-anm-NNNNN.dat", &
+         "        coefficient files DIR/synthetic-anm-NNNNN.dat; the spectrum parameters are", &
+         "        described in docs/synthetic-shapes.md", &
          "  --help, --version", &
          "", &
          "Environment: OMP_NUM_THREADS sets the number of threads."
@@ -88,6 +90,27 @@ contains
       end if
       i = i + 1
    end subroutine int_option
+
+   !> Real value of option `name` at argument position i+1.
+   subroutine real_option(i, name, val, error)
+      integer, intent(inout) :: i
+      character(len=*), intent(in) :: name
+      real(wp), intent(out) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer :: stat
+      character(len=:), allocatable :: text
+      if (i + 1 > command_argument_count()) then
+         call fatal_error(error, "option "//name//" needs a value", error_code%value)
+         return
+      end if
+      text = argument(i + 1)
+      read (text, *, iostat=stat) val
+      if (stat /= 0 .or. verify(trim(text), "+-.0123456789eEdD") /= 0) then
+         call fatal_error(error, "option "//name//": '"//text//"' is not a number", error_code%value)
+         return
+      end if
+      i = i + 1
+   end subroutine real_option
 
    subroutine run_shape(error)
       type(error_type), allocatable, intent(out) :: error
@@ -175,6 +198,20 @@ contains
             call int_option(i, "--seed", seed, error)
          case ("--order")
             call int_option(i, "--order", par%nmax, error)
+         case ("--bc-mean")
+            call real_option(i, "--bc-mean", par%bc_mean, error)
+         case ("--bc-sd")
+            call real_option(i, "--bc-sd", par%bc_sd, error)
+         case ("--ab-mean")
+            call real_option(i, "--ab-mean", par%ab_mean, error)
+         case ("--ab-sd")
+            call real_option(i, "--ab-sd", par%ab_sd, error)
+         case ("--rough-c")
+            call real_option(i, "--rough-c", par%rough_c, error)
+         case ("--rough-beta")
+            call real_option(i, "--rough-beta", par%rough_beta, error)
+         case ("--sigma-rough")
+            call real_option(i, "--sigma-rough", par%sigma_rough, error)
          case default
             if (arg(1:min(1, len(arg))) == "-") then
                call fatal_error(error, "anm synth: unknown option '"//arg//"'", error_code%value)

@@ -34,7 +34,7 @@ contains
       character(len=*), intent(in) :: name
       !> Geometry of the shape.
       type(shape_geometry_type), intent(in) :: g
-      write (unit, '(a,6(1x,f0.4),1x,es13.6,1x,es13.6,1x,f0.4,1x,f0.4,1x,f0.4,1x,i0,3(1x,f0.5),2(1x,f0.5))') &
+      write (unit, '(a,6(1x,f11.5),2(1x,es14.7),3(1x,f9.5),1x,i3,3(1x,f11.5),2(1x,f8.5))') &
          trim(name), g%extent_lo(1), g%extent_hi(1), g%extent_lo(2), g%extent_hi(2), g%extent_lo(3), &
          g%extent_hi(3), g%volume, g%area, g%norm_area, g%equiv_diameter, g%itrace, g%order, &
          g%length, g%width, g%thickness, g%length / g%thickness, g%width / g%thickness

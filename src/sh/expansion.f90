@@ -166,7 +166,7 @@ contains
       !> Polar angle and azimuth.
       real(wp), intent(in) :: theta, phi
       real(wp) :: r
-      r = radius_xs(self, cos(theta), abs(sin(theta)), cos(phi), sin(phi))
+      r = radius_xs(self, cos(theta), sin(theta), cos(phi), sin(phi))
    end function radius
 
    !> Fused evaluation from cos/sin of theta and phi. Columns whose sectoral seed has fallen below
@@ -239,7 +239,7 @@ contains
          idx_out(m) = k
          k = k + nmax - m + 1
       end do
-      call legendre_values(self%table, cos(theta), p, abs(sin(theta)))
+      call legendre_values(self%table, cos(theta), p, sin(theta))
       call legendre_theta_derivatives(self%table, p, nmax, idx_out, dp, mps)
       r = 0.0_wp
       r_theta = 0.0_wp

@@ -83,7 +83,9 @@ contains
    end function new_legendre_table
 
    !> Pbar_n^m(x) for all 0 <= m <= n <= table%nmax, packed by order (see module doc).
-   !> `s` is sin(theta) = sqrt(1 - x^2) >= 0; pass it when known to avoid cancellation near the poles.
+   !> `s` is sin(theta) (default sqrt(1 - x^2)); pass it when known to avoid cancellation near the
+   !> poles. A negative s (theta outside [0, pi]) multiplies order m by (-1)^m, which continues
+   !> Y_n^m(theta, phi) to such angles consistently with the direction (sin t cos p, sin t sin p, cos t).
    pure subroutine legendre_values(table, x, p, s)
       !> Recursion table.
       type(legendre_table_type), intent(in) :: table

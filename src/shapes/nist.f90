@@ -165,7 +165,8 @@ contains
       integer :: unit, stat, n, m
       character(len=512) :: msg
 
-      c = sh_to_complex(shape)
+      allocate (c(0:shape%nmax, -shape%nmax:shape%nmax))
+      c(:, :) = sh_to_complex(shape)
       open (newunit=unit, file=path, status="replace", action="write", iostat=stat, iomsg=msg)
       if (stat /= 0) then
          call fatal_error(error, trim(path)//": cannot write shape file ("//trim(msg)//")", error_code%io)

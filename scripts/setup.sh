@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Install what Anm needs, only what is missing; quick (about a second) when nothing is.
+#   Debian packages: gfortran libhdf5-dev liblapack-dev pkg-config
+#   PyPI (pinned):   setuptools fpm numpy h5py matplotlib meson ninja pytest, and the post/ package itself
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+apt_packages=(gfortran libhdf5-dev liblapack-dev pkg-config)
+pip_pins=(setuptools==84.2.1 fpm==0.12.0 numpy==2.4.6 h5py==3.16.0 matplotlib==3.11.2 meson==1.12.1 ninja==1.13.2 pytest==9.2.0)
+
+missing=()
+for p in "${apt_packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "setup: installing Debian packages: ${missing[*]}" >&2
+    sudo_cmd=""
+    [ "$(id -u)" -ne 0 ] && sudo_cmd="sudo"
+    $sudo_cmd apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+python="${PYTHON:-python3}"
+need_pip=$("$python" - "${pip_pins[@]}" <<'PY'
+import sys
+from importlib import metadata
+out = []
+for pin in sys.argv[1:]:
+    name, version = pin.split("==")
+    try:
+        if metadata.version(name) != version:
+            out.append(pin)
+    except metadata.PackageNotFoundError:
+        out.append(pin)
+print(" ".join(out))
+PY
+)
+if [ -n "$need_pip" ]; then
+    echo "setup: installing from PyPI: $need_pip" >&2
+    "$python" -m pip install -q --disable-pip-version-check $need_pip
+fi
+
+# the post-processing package, editable, so that post/ changes need no reinstall
+if ! "$python" -c "import anm_post" 2>/dev/null; then
+    echo "setup: installing the anm_post package (post/)" >&2
+    "$python" -m pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e "$here/post"
+fi
