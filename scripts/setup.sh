@@ -40,8 +40,10 @@ if [ -n "$need_pip" ]; then
     "$python" -m pip install -q --disable-pip-version-check $need_pip
 fi
 
-# the post-processing package, editable, so that post/ changes need no reinstall
-if ! "$python" -c "import anm_post" 2>/dev/null; then
+# the post-processing package, editable (post/ changes need no reinstall); reinstalled when the
+# installed copy belongs to another checkout
+installed=$("$python" -c "import anm_post, os; print(os.path.dirname(os.path.dirname(os.path.realpath(anm_post.__file__))))" 2>/dev/null || true)
+if [ "$installed" != "$(realpath "$here/post")" ]; then
     echo "setup: installing the anm_post package (post/)" >&2
     "$python" -m pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e "$here/post"
 fi
