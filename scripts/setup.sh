@@ -37,7 +37,7 @@ PY
 )
 if [ -n "$need_pip" ]; then
     echo "setup: installing from PyPI: $need_pip" >&2
-    "$python" -m pip install -q --disable-pip-version-check $need_pip
+    "$python" -m pip install -q --disable-pip-version-check --root-user-action=ignore $need_pip
 fi
 
 # the post-processing package, editable (post/ changes need no reinstall); reinstalled when the
@@ -45,5 +45,5 @@ fi
 installed=$("$python" -c "import anm_post, os; print(os.path.dirname(os.path.dirname(os.path.realpath(anm_post.__file__))))" 2>/dev/null || true)
 if [ "$installed" != "$(realpath "$here/post")" ]; then
     echo "setup: installing the anm_post package (post/)" >&2
-    "$python" -m pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e "$here/post"
+    "$python" -m pip install -q --disable-pip-version-check --root-user-action=ignore --no-build-isolation --no-deps -e "$here/post"
 fi

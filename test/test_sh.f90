@@ -12,7 +12,8 @@ module test_sh
       & legendre_theta_derivatives, packed_size
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion, new_sh_expansion_real, sh_truncate, &
       & sh_to_complex, surface_normal
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize, sh_analyze
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize, sh_analyze, sh_grid_normals
+   use anm_shapes_analytic, only: ellipsoid_shape
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -36,7 +37,8 @@ contains
               new_unittest("analysis inverts synthesis", test_round_trip), &
               new_unittest("truncation keeps low degrees", test_truncation), &
               new_unittest("complex coefficients round trip", test_complex_round_trip), &
-              new_unittest("surface normal vs cross product of tangents", test_normal)]
+              new_unittest("surface normal vs cross product of tangents", test_normal), &
+              new_unittest("grid normals of an ellipsoid are exact", test_grid_normals)]
    end subroutine collect_sh
 
    !> A random real expansion of degree nmax with mean radius 1 and decaying coefficients.
@@ -343,4 +345,23 @@ contains
          x = s%radius(tt, pp) * [sin(tt) * cos(pp), sin(tt) * sin(pp), cos(tt)]
       end function pos
    end subroutine test_normal
+   subroutine test_grid_normals(error)
+      type(error_type), allocatable, intent(out) :: error
+      ! the normal of x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 is proportional to (x/a^2, y/b^2, z/c^2)
+      type(sh_grid_type) :: grid
+      real(wp) :: x(3, 40, 80), nrm(3, 40, 80), ref(3), worst
+      integer :: i, j
+      grid = new_sh_grid(40, 80, 40)
+      call sh_grid_normals(grid, ellipsoid_shape(1.5_wp, 1.2_wp, 1.0_wp, 40), x, nrm)
+      worst = 0.0_wp
+      do j = 1, 80
+         do i = 1, 40
+            ref = x(:, i, j) / [1.5_wp**2, 1.2_wp**2, 1.0_wp]
+            ref = ref / norm2(ref)
+            worst = max(worst, norm2(nrm(:, i, j) - ref))
+         end do
+      end do
+      print '(a,es9.2)', "        worst normal error on the ellipsoid grid: ", worst
+      call check(error, worst, 0.0_wp, "normal", thr=1.0e-6_wp)
+   end subroutine test_grid_normals
 end module test_sh

@@ -19,7 +19,7 @@ module anm_sh_grid
    implicit none
    private
 
-   public :: sh_grid_type, new_sh_grid, sh_synthesize, sh_analyze
+   public :: sh_grid_type, new_sh_grid, sh_synthesize, sh_analyze, sh_grid_normals
 
    !> Gauss grid with precomputed Legendre and trigonometric tables up to degree lmax
    !> (immutable after construction, shareable between threads).
@@ -141,6 +141,42 @@ contains
          out = matmul(g, t)
       end subroutine stage
    end subroutine sh_synthesize
+
+   !> Surface points and outward unit normals (body frame) at every grid node:
+   !> x(:, i, j) = r rhat and nrm(:, i, j) ~ r rhat - r_theta thetahat - (r_phi / sin theta) phihat.
+   pure subroutine sh_grid_normals(grid, shape, x, nrm, nused)
+      !> Grid with tables.
+      type(sh_grid_type), intent(in) :: grid
+      !> Expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      !> Surface points, (3, ntheta, nphi).
+      real(wp), intent(out) :: x(:, :, :)
+      !> Unit normals, (3, ntheta, nphi).
+      real(wp), intent(out) :: nrm(:, :, :)
+      !> Degree at which to truncate.
+      integer, intent(in), optional :: nused
+      real(wp), allocatable :: r(:, :), rt(:, :), rp(:, :)
+      real(wp) :: st, ct, cp, sp, rh(3), th(3), ph(3), v(3)
+      integer :: i, j, nt, np
+      nt = grid%sphere%ntheta
+      np = grid%sphere%nphi
+      allocate (r(nt, np), rt(nt, np), rp(nt, np))
+      call sh_synthesize(grid, shape, r, rt, rp, nused)
+      do j = 1, np
+         cp = cos(grid%sphere%phi(j))
+         sp = sin(grid%sphere%phi(j))
+         do i = 1, nt
+            st = grid%sphere%sint(i)
+            ct = grid%sphere%x(i)
+            rh = [st * cp, st * sp, ct]
+            th = [ct * cp, ct * sp, -st]
+            ph = [-sp, cp, 0.0_wp]
+            x(:, i, j) = r(i, j) * rh
+            v = r(i, j) * rh - rt(i, j) * th - rp(i, j) * ph
+            nrm(:, i, j) = v / norm2(v)
+         end do
+      end do
+   end subroutine sh_grid_normals
 
    !> Project grid values f(i, j) onto real SH coefficients of degree <= nmax by Gauss quadrature
    !> (the inverse of `sh_synthesize` for band-limited f of degree <= min(nmax, grid%lmax) when the
