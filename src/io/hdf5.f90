@@ -1,0 +1,594 @@
+!> Thin wrapper over HDF5's Fortran API: create/open files, groups, datasets and attributes of
+!> float64, int32 and strings, with object timestamps switched off (so that two runs with the same
+!> input give files with equal content). Errors name `file::object`.
+!>
+!> Usage:
+!>     call h5_create(file, "model.h5.tmp", error)
+!>     call h5_write(file, "/box/length", [20.0_wp, 20.0_wp, 20.0_wp], error)
+!>     call h5_close(file, error)
+module anm_io_hdf5
+   use hdf5, only: hid_t, hsize_t, size_t, h5open_f, h5fcreate_f, h5fopen_f, h5fclose_f, h5gcreate_f, h5gclose_f, &
+      & h5screate_simple_f, h5screate_f, h5sclose_f, h5dcreate_f, h5dopen_f, h5dwrite_f, h5dread_f, h5dclose_f, &
+      & h5dget_space_f, h5sget_simple_extent_ndims_f, h5sget_simple_extent_dims_f, h5pcreate_f, h5pclose_f, &
+      & h5pset_obj_track_times_f, h5acreate_f, h5awrite_f, h5aread_f, h5aclose_f, h5aopen_f, h5tcopy_f, &
+      & h5tset_size_f, h5tclose_f, h5dget_type_f, h5tget_size_f, h5lexists_f, h5aexists_f, &
+      & H5F_ACC_TRUNC_F, H5F_ACC_RDONLY_F, H5P_DATASET_CREATE_F, H5P_GROUP_CREATE_F, H5S_SCALAR_F, &
+      & H5T_NATIVE_DOUBLE, H5T_NATIVE_INTEGER, H5T_FORTRAN_S1
+   use anm_core_kinds, only: wp
+   use anm_core_error, only: error_type, fatal_error, error_code
+   implicit none
+   private
+
+   public :: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, h5_read, &
+      & h5_read_attr, h5_dims, h5_exists, h5_read_fixed_strings
+
+   !> An open HDF5 file.
+   type :: h5_file_type
+      !> File name (for messages).
+      character(len=:), allocatable :: name
+      !> HDF5 identifier.
+      integer(hid_t) :: id = -1
+      !> Dataset and group creation property lists (timestamps off).
+      integer(hid_t) :: dcpl = -1, gcpl = -1
+   end type h5_file_type
+
+   !> Write a dataset (float64 or int32 arrays of rank 1-3, or a string).
+   interface h5_write
+      module procedure :: write_real1, write_real2, write_real3, write_int1, write_string, write_strings
+   end interface h5_write
+
+   !> Write an attribute of a group or dataset.
+   interface h5_write_attr
+      module procedure :: attr_int, attr_real, attr_string
+   end interface h5_write_attr
+
+   !> Read a dataset.
+   interface h5_read
+      module procedure :: read_real1, read_real2, read_real3, read_int1, read_string
+   end interface h5_read
+
+   !> Read an attribute.
+   interface h5_read_attr
+      module procedure :: read_attr_int, read_attr_real, read_attr_string
+   end interface h5_read_attr
+
+contains
+
+   subroutine fail(error, file, obj, what)
+      type(error_type), allocatable, intent(out) :: error
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: obj, what
+      call fatal_error(error, file%name//"::"//obj//": "//what, error_code%io)
+   end subroutine fail
+
+   !> Create (truncate) a file for writing.
+   subroutine h5_create(file, name, error)
+      !> Handle.
+      type(h5_file_type), intent(out) :: file
+      !> File name.
+      character(len=*), intent(in) :: name
+      !> Error.
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      file%name = name
+      call h5open_f(st)
+      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st)
+      if (st /= 0) then
+         call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
+         return
+      end if
+      call h5pcreate_f(H5P_DATASET_CREATE_F, file%dcpl, st)
+      call h5pset_obj_track_times_f(file%dcpl, .false., st)
+      call h5pcreate_f(H5P_GROUP_CREATE_F, file%gcpl, st)
+      call h5pset_obj_track_times_f(file%gcpl, .false., st)
+   end subroutine h5_create
+
+   !> Open an existing file read-only.
+   subroutine h5_open_read(file, name, error)
+      !> Handle.
+      type(h5_file_type), intent(out) :: file
+      !> File name.
+      character(len=*), intent(in) :: name
+      !> Error: missing or not HDF5.
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      logical :: exists
+      file%name = name
+      inquire (file=name, exist=exists)
+      if (.not. exists) then
+         call fatal_error(error, name//": no such model file", error_code%io)
+         return
+      end if
+      call h5open_f(st)
+      call h5fopen_f(name, H5F_ACC_RDONLY_F, file%id, st)
+      if (st /= 0) call fatal_error(error, name//": not a readable HDF5 file", error_code%io)
+   end subroutine h5_open_read
+
+   !> Close a file.
+   subroutine h5_close(file, error)
+      !> Handle.
+      type(h5_file_type), intent(inout) :: file
+      !> Error.
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      if (file%dcpl >= 0) call h5pclose_f(file%dcpl, st)
+      if (file%gcpl >= 0) call h5pclose_f(file%gcpl, st)
+      call h5fclose_f(file%id, st)
+      if (st /= 0) call fatal_error(error, file%name//": error closing HDF5 file", error_code%io)
+      file%id = -1
+   end subroutine h5_close
+
+   !> True if the link `path` exists (parent groups must exist).
+   function h5_exists(file, path) result(exists)
+      !> Handle.
+      type(h5_file_type), intent(in) :: file
+      !> Object path.
+      character(len=*), intent(in) :: path
+      logical :: exists
+      integer :: st
+      call h5lexists_f(file%id, path, exists, st)
+      if (st /= 0) exists = .false.
+   end function h5_exists
+
+   !> Create a group.
+   subroutine h5_group(file, path, error)
+      !> Handle.
+      type(h5_file_type), intent(in) :: file
+      !> Group path.
+      character(len=*), intent(in) :: path
+      !> Error.
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: gid
+      integer :: st
+      call h5gcreate_f(file%id, path, gid, st, gcpl_id=file%gcpl)
+      if (st /= 0) then
+         call fail(error, file, path, "cannot create group")
+         return
+      end if
+      call h5gclose_f(gid, st)
+   end subroutine h5_group
+
+   subroutine make_dataset(file, path, dtype, dims, dset, space, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer(hid_t), intent(in) :: dtype
+      integer(hsize_t), intent(in) :: dims(:)
+      integer(hid_t), intent(out) :: dset, space
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      if (size(dims) == 0) then
+         call h5screate_f(H5S_SCALAR_F, space, st)
+      else
+         call h5screate_simple_f(size(dims), dims, space, st)
+      end if
+      call h5dcreate_f(file%id, path, dtype, space, dset, st, dcpl_id=file%dcpl)
+      if (st /= 0) call fail(error, file, path, "cannot create dataset")
+   end subroutine make_dataset
+
+   subroutine finish(file, path, st, dset, space, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer, intent(in) :: st
+      integer(hid_t), intent(in) :: dset, space
+      type(error_type), allocatable, intent(out) :: error
+      integer :: s2
+      call h5dclose_f(dset, s2)
+      call h5sclose_f(space, s2)
+      if (st /= 0) call fail(error, file, path, "write failed")
+   end subroutine finish
+
+   subroutine write_real1(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), intent(in) :: x(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space
+      integer :: st
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_real1
+
+   subroutine write_real2(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), intent(in) :: x(:, :)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space
+      integer :: st
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_real2
+
+   subroutine write_real3(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), intent(in) :: x(:, :, :)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space
+      integer :: st
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_real3
+
+   subroutine write_int1(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer, intent(in) :: x(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space
+      integer :: st
+      call make_dataset(file, path, H5T_NATIVE_INTEGER, shape(x, hsize_t), dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_int1
+
+   subroutine string_type(len, dtype)
+      integer, intent(in) :: len
+      integer(hid_t), intent(out) :: dtype
+      integer :: st
+      call h5tcopy_f(H5T_FORTRAN_S1, dtype, st)
+      call h5tset_size_f(dtype, int(max(1, len), size_t), st)
+   end subroutine string_type
+
+   subroutine write_string(file, path, text, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      character(len=*), intent(in) :: text
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space, dtype
+      integer(hsize_t) :: none(0)
+      integer :: st
+      call string_type(len(text), dtype)
+      call make_dataset(file, path, dtype, none, dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, dtype, text, [1_hsize_t], st)
+      call h5tclose_f(dtype, st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_string
+
+   subroutine write_strings(file, path, text, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      character(len=*), intent(in) :: text(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space, dtype
+      integer :: st
+      call string_type(len(text), dtype)
+      call make_dataset(file, path, dtype, shape(text, hsize_t), dset, space, error)
+      if (allocated(error)) return
+      call h5dwrite_f(dset, dtype, text, shape(text, hsize_t), st)
+      call h5tclose_f(dtype, st)
+      call finish(file, path, st, dset, space, error)
+   end subroutine write_strings
+
+   subroutine attr_common(file, path, name, dtype, aid, space, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer(hid_t), intent(in) :: dtype
+      integer(hid_t), intent(out) :: aid, space
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      call h5screate_f(H5S_SCALAR_F, space, st)
+      call h5acreate_by_path(file, path, name, dtype, space, aid, st)
+      if (st /= 0) call fail(error, file, path//"@"//name, "cannot create attribute")
+   end subroutine attr_common
+
+   subroutine h5acreate_by_path(file, path, name, dtype, space, aid, st)
+      use hdf5, only: h5oopen_f, h5oclose_f
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer(hid_t), intent(in) :: dtype, space
+      integer(hid_t), intent(out) :: aid
+      integer, intent(out) :: st
+      integer(hid_t) :: oid
+      integer :: s2
+      call h5oopen_f(file%id, path, oid, st)
+      if (st /= 0) return
+      call h5acreate_f(oid, name, dtype, space, aid, st)
+      call h5oclose_f(oid, s2)
+   end subroutine h5acreate_by_path
+
+   subroutine attr_int(file, path, name, val, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer, intent(in) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid, space
+      integer :: st
+      call attr_common(file, path, name, H5T_NATIVE_INTEGER, aid, space, error)
+      if (allocated(error)) return
+      call h5awrite_f(aid, H5T_NATIVE_INTEGER, val, [1_hsize_t], st)
+      call h5aclose_f(aid, st)
+      call h5sclose_f(space, st)
+   end subroutine attr_int
+
+   subroutine attr_real(file, path, name, val, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      real(wp), intent(in) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid, space
+      integer :: st
+      call attr_common(file, path, name, H5T_NATIVE_DOUBLE, aid, space, error)
+      if (allocated(error)) return
+      call h5awrite_f(aid, H5T_NATIVE_DOUBLE, val, [1_hsize_t], st)
+      call h5aclose_f(aid, st)
+      call h5sclose_f(space, st)
+   end subroutine attr_real
+
+   subroutine attr_string(file, path, name, val, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      character(len=*), intent(in) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid, space, dtype
+      integer :: st
+      call string_type(len(val), dtype)
+      call attr_common(file, path, name, dtype, aid, space, error)
+      if (allocated(error)) return
+      call h5awrite_f(aid, dtype, val, [1_hsize_t], st)
+      call h5aclose_f(aid, st)
+      call h5sclose_f(space, st)
+      call h5tclose_f(dtype, st)
+   end subroutine attr_string
+
+   !> Dimensions of a dataset (Fortran order); error if it does not exist.
+   subroutine h5_dims(file, path, dims, error)
+      !> Handle.
+      type(h5_file_type), intent(in) :: file
+      !> Dataset path.
+      character(len=*), intent(in) :: path
+      !> Dimensions (Fortran order; reversed with respect to numpy's shape).
+      integer, allocatable, intent(out) :: dims(:)
+      !> Error.
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, space
+      integer(hsize_t) :: d(7), mx(7)
+      integer :: st, rank
+      call h5dopen_f(file%id, path, dset, st)
+      if (st /= 0) then
+         call fail(error, file, path, "missing dataset")
+         return
+      end if
+      call h5dget_space_f(dset, space, st)
+      call h5sget_simple_extent_ndims_f(space, rank, st)
+      call h5sget_simple_extent_dims_f(space, d(1:rank), mx(1:rank), st)
+      dims = int(d(1:rank))
+      call h5sclose_f(space, st)
+      call h5dclose_f(dset, st)
+   end subroutine h5_dims
+
+   subroutine open_dataset(file, path, dset, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer(hid_t), intent(out) :: dset
+      type(error_type), allocatable, intent(out) :: error
+      integer :: st
+      call h5dopen_f(file%id, path, dset, st)
+      if (st /= 0) call fail(error, file, path, "missing dataset")
+   end subroutine open_dataset
+
+   subroutine read_real1(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), allocatable, intent(out) :: x(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer, allocatable :: dims(:)
+      integer(hid_t) :: dset
+      integer :: st
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= 1) then
+         call fail(error, file, path, "expected a rank-1 dataset")
+         return
+      end if
+      allocate (x(dims(1)))
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine read_real1
+
+   subroutine read_real2(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), allocatable, intent(out) :: x(:, :)
+      type(error_type), allocatable, intent(out) :: error
+      integer, allocatable :: dims(:)
+      integer(hid_t) :: dset
+      integer :: st
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= 2) then
+         call fail(error, file, path, "expected a rank-2 dataset")
+         return
+      end if
+      allocate (x(dims(1), dims(2)))
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine read_real2
+
+   subroutine read_real3(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      real(wp), allocatable, intent(out) :: x(:, :, :)
+      type(error_type), allocatable, intent(out) :: error
+      integer, allocatable :: dims(:)
+      integer(hid_t) :: dset
+      integer :: st
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= 3) then
+         call fail(error, file, path, "expected a rank-3 dataset")
+         return
+      end if
+      allocate (x(dims(1), dims(2), dims(3)))
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine read_real3
+
+   subroutine read_int1(file, path, x, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer, allocatable, intent(out) :: x(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer, allocatable :: dims(:)
+      integer(hid_t) :: dset
+      integer :: st
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= 1) then
+         call fail(error, file, path, "expected a rank-1 dataset")
+         return
+      end if
+      allocate (x(dims(1)))
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dread_f(dset, H5T_NATIVE_INTEGER, x, int(dims, hsize_t), st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine read_int1
+
+   subroutine read_string(file, path, text, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      character(len=:), allocatable, intent(out) :: text
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, dtype
+      integer(size_t) :: n
+      integer :: st
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dget_type_f(dset, dtype, st)
+      call h5tget_size_f(dtype, n, st)
+      allocate (character(len=n) :: text)
+      call h5dread_f(dset, dtype, text, [1_hsize_t], st)
+      call h5tclose_f(dtype, st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine read_string
+
+   !> Read a rank-1 dataset of fixed-length strings into `text` (each truncated to len(text)).
+   subroutine h5_read_fixed_strings(file, path, text, error)
+      !> Handle.
+      type(h5_file_type), intent(in) :: file
+      !> Dataset path.
+      character(len=*), intent(in) :: path
+      !> Strings read.
+      character(len=*), allocatable, intent(out) :: text(:)
+      !> Error.
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dset, dtype
+      integer(size_t) :: n
+      integer, allocatable :: dims(:)
+      character(len=:), allocatable :: buf(:)
+      integer :: st, i
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= 1) then
+         call fail(error, file, path, "expected a rank-1 dataset of strings")
+         return
+      end if
+      call open_dataset(file, path, dset, error)
+      if (allocated(error)) return
+      call h5dget_type_f(dset, dtype, st)
+      call h5tget_size_f(dtype, n, st)
+      allocate (character(len=n) :: buf(dims(1)))
+      call h5dread_f(dset, dtype, buf, int(dims, hsize_t), st)
+      call h5tclose_f(dtype, st)
+      call h5dclose_f(dset, st)
+      if (st /= 0) then
+         call fail(error, file, path, "read failed")
+         return
+      end if
+      allocate (text(dims(1)))
+      do i = 1, dims(1)
+         text(i) = buf(i)
+      end do
+   end subroutine h5_read_fixed_strings
+
+   subroutine open_attr(file, path, name, aid, error)
+      use hdf5, only: h5oopen_f, h5oclose_f
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer(hid_t), intent(out) :: aid
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: oid
+      integer :: st, s2
+      logical :: exists
+      call h5oopen_f(file%id, path, oid, st)
+      if (st /= 0) then
+         call fail(error, file, path, "missing object")
+         return
+      end if
+      call h5aexists_f(oid, name, exists, st)
+      if (.not. exists) then
+         call h5oclose_f(oid, s2)
+         call fail(error, file, path//"@"//name, "missing attribute")
+         return
+      end if
+      call h5aopen_f(oid, name, aid, st)
+      call h5oclose_f(oid, s2)
+   end subroutine open_attr
+
+   subroutine read_attr_int(file, path, name, val, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer, intent(out) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid
+      integer :: st
+      val = 0
+      call open_attr(file, path, name, aid, error)
+      if (allocated(error)) return
+      call h5aread_f(aid, H5T_NATIVE_INTEGER, val, [1_hsize_t], st)
+      call h5aclose_f(aid, st)
+   end subroutine read_attr_int
+
+   subroutine read_attr_real(file, path, name, val, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      real(wp), intent(out) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid
+      integer :: st
+      val = 0.0_wp
+      call open_attr(file, path, name, aid, error)
+      if (allocated(error)) return
+      call h5aread_f(aid, H5T_NATIVE_DOUBLE, val, [1_hsize_t], st)
+      call h5aclose_f(aid, st)
+   end subroutine read_attr_real
+
+   subroutine read_attr_string(file, path, name, val, error)
+      use hdf5, only: h5aget_type_f
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      character(len=:), allocatable, intent(out) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: aid, dtype
+      integer(size_t) :: n
+      integer :: st
+      call open_attr(file, path, name, aid, error)
+      if (allocated(error)) return
+      call h5aget_type_f(aid, dtype, st)
+      call h5tget_size_f(dtype, n, st)
+      allocate (character(len=n) :: val)
+      call h5aread_f(aid, dtype, val, [1_hsize_t], st)
+      call h5tclose_f(dtype, st)
+      call h5aclose_f(aid, st)
+   end subroutine read_attr_string
+end module anm_io_hdf5
