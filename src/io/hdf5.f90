@@ -13,7 +13,7 @@ module anm_io_hdf5
       & h5pset_obj_track_times_f, h5acreate_f, h5awrite_f, h5aread_f, h5aclose_f, h5aopen_f, h5tcopy_f, &
       & h5tset_size_f, h5tclose_f, h5dget_type_f, h5tget_size_f, h5lexists_f, h5aexists_f, &
       & H5F_ACC_TRUNC_F, H5F_ACC_RDONLY_F, H5P_DATASET_CREATE_F, H5P_GROUP_CREATE_F, H5S_SCALAR_F, &
-      & H5T_NATIVE_DOUBLE, H5T_NATIVE_INTEGER, H5T_FORTRAN_S1
+      & H5T_NATIVE_DOUBLE, H5T_NATIVE_INTEGER, H5T_FORTRAN_S1, h5eset_auto_f
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type, fatal_error, error_code
    implicit none
@@ -72,6 +72,7 @@ contains
       integer :: st
       file%name = name
       call h5open_f(st)
+      call h5eset_auto_f(0, st)
       call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st)
       if (st /= 0) then
          call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
@@ -100,6 +101,7 @@ contains
          return
       end if
       call h5open_f(st)
+      call h5eset_auto_f(0, st)   ! errors are reported through error_type, not HDF5's stack dump
       call h5fopen_f(name, H5F_ACC_RDONLY_F, file%id, st)
       if (st /= 0) call fatal_error(error, name//": not a readable HDF5 file", error_code%io)
    end subroutine h5_open_read

@@ -211,16 +211,16 @@ contains
                                  do s2 = -1, 1
                                     do s1 = -1, 1
                                        sh = [s1, s2, s3] * self%box
-                                       if (sum((d + sh)**2) < lim * lim) call push(j, sh)
+                                       if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
                                     end do
                                  end do
                               end do
                            else
                               sh = -self%box * anint(d / self%box)
-                              if (sum((d + sh)**2) < lim * lim) call push(j, sh)
+                              if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
                            end if
                         else
-                           if (sum(d**2) < lim * lim) call push(j, [0.0_wp, 0.0_wp, 0.0_wp])
+                           if (sum(d**2) < lim * lim) call push(cand, shift, ncand, j, [0.0_wp, 0.0_wp, 0.0_wp])
                         end if
                         j = self%next(j)
                      end do
@@ -229,22 +229,25 @@ contains
             end do
          end associate
       end do
-   contains
-      pure subroutine push(jj, s)
-         integer, intent(in) :: jj
-         real(wp), intent(in) :: s(3)
-         integer, allocatable :: tc(:)
-         real(wp), allocatable :: ts(:, :)
-         if (ncand == size(cand)) then
-            allocate (tc(2 * ncand), ts(3, 2 * ncand))
-            tc(:ncand) = cand
-            ts(:, :ncand) = shift
-            call move_alloc(tc, cand)
-            call move_alloc(ts, shift)
-         end if
-         ncand = ncand + 1
-         cand(ncand) = jj
-         shift(:, ncand) = s
-      end subroutine push
    end subroutine query
+
+   pure subroutine push(cand, shift, ncand, jj, s)
+      integer, allocatable, intent(inout) :: cand(:)
+      real(wp), allocatable, intent(inout) :: shift(:, :)
+      integer, intent(inout) :: ncand
+      integer, intent(in) :: jj
+      real(wp), intent(in) :: s(3)
+      integer, allocatable :: tc(:)
+      real(wp), allocatable :: ts(:, :)
+      if (ncand == size(cand)) then
+         allocate (tc(2 * ncand), ts(3, 2 * ncand))
+         tc(:ncand) = cand
+         ts(:, :ncand) = shift
+         call move_alloc(tc, cand)
+         call move_alloc(ts, shift)
+      end if
+      ncand = ncand + 1
+      cand(ncand) = jj
+      shift(:, ncand) = s
+   end subroutine push
 end module anm_parking_cell_list
