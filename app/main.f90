@@ -11,6 +11,8 @@ program anm
    use anm_shapes_nist, only: write_nist_shape
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_cli_shape_table, only: write_geometry_header, write_geometry_row
+   use anm_io_model, only: model_type, read_model
+   use anm_audit_verify, only: verify_report_type, verify_model
    implicit none
 
    character(len=*), parameter :: version = "0.1.0"
@@ -31,6 +33,8 @@ program anm
       call run_shape(error)
    case ("synth")
       call run_synth(error)
+   case ("verify")
+      call run_verify(error)
    case default
       call fatal_error(error, "unknown command '"//command//"' (try: anm --help)", error_code%value)
    end select
@@ -56,6 +60,10 @@ contains
          "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
          "        coefficient files DIR/synthetic-anm-NNNNN.dat; the spectrum parameters are", &
          "        described in docs/synthetic-shapes.md", &
+         "  verify MODEL.h5 [--resolution N] [--tolerance MM]", &
+         "        audit a model independently of the parking path: every neighbouring pair (periodic", &
+         "        images included) and the walls, by dense point sampling (N x 2N directions per", &
+         "        particle, default 120); exits with status 3 if any penetration exceeds the tolerance", &
          "  --help, --version", &
          "", &
          "Environment: OMP_NUM_THREADS sets the number of threads."
@@ -235,4 +243,67 @@ contains
       end do
       write (output_unit, '(a)') "wrote "//to_string(count)//" synthetic shapes to "//dir
    end subroutine run_synth
+   subroutine run_verify(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: path, arg
+      integer :: i, resolution
+      real(wp) :: tol
+      logical :: have_tol
+      type(model_type) :: model
+      type(verify_report_type) :: rep
+
+      resolution = 120
+      have_tol = .false.
+      tol = 0.0_wp
+      i = 2
+      do while (i <= command_argument_count())
+         arg = argument(i)
+         select case (arg)
+         case ("--resolution")
+            call int_option(i, "--resolution", resolution, error)
+            if (allocated(error)) return
+            if (resolution < 4) then
+               call fatal_error(error, "option --resolution: "//to_string(resolution)//" must be >= 4", error_code%value)
+               return
+            end if
+         case ("--tolerance")
+            call real_option(i, "--tolerance", tol, error)
+            if (allocated(error)) return
+            have_tol = .true.
+         case default
+            if (arg(1:min(1, len(arg))) == "-") then
+               call fatal_error(error, "anm verify: unknown option '"//arg//"'", error_code%value)
+               return
+            end if
+            path = arg
+         end select
+         i = i + 1
+      end do
+      if (.not. allocated(path)) then
+         call fatal_error(error, "anm verify: missing MODEL.h5 argument", error_code%value)
+         return
+      end if
+      call read_model(path, model, error)
+      if (allocated(error)) return
+      if (have_tol) then
+         call verify_model(model, resolution, rep, tol)
+      else
+         call verify_model(model, resolution, rep)
+      end if
+      write (output_unit, '(a)') "verify "//path
+      write (output_unit, '(a,i0)') "  particles:            ", model%np
+      write (output_unit, '(a,i0,a)') "  samples per particle: ", rep%samples, " directions"
+      write (output_unit, '(a,i0)') "  pairs checked:        ", rep%pairs_checked
+      write (output_unit, '(a,i0)') "  overlapping pairs:    ", rep%overlapping_pairs
+      if (.not. model%periodic) write (output_unit, '(a,i0)') "  wall violations:      ", rep%wall_violations
+      write (output_unit, '(a,es12.5,a)') "  largest penetration:  ", rep%max_depth, " mm"
+      if (rep%worst(1) > 0) write (output_unit, '(a,i0,a,i0)') "  deepest pair:         particles ", &
+         rep%worst(1) - 1, " and ", rep%worst(2) - 1
+      write (output_unit, '(a,es12.5,a)') "  tolerance:            ", rep%tolerance, " mm"
+      if (rep%overlapping_pairs > 0 .or. rep%wall_violations > 0) then
+         write (output_unit, '(a)') "  result: FAIL (overlap deeper than the tolerance)"
+         call exit(3)
+      end if
+      write (output_unit, '(a)') "  result: OK"
+   end subroutine run_verify
 end program anm

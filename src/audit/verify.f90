@@ -1,0 +1,249 @@
+!> `anm verify`: an audit of a model file that shares nothing with the parking path but the SH
+!> evaluation. Every pair of particles whose bounding spheres intersect (periodic images included)
+!> is checked by dense point sampling both ways: the surface points of A on a latitude-longitude
+!> grid of `resolution` x 2 `resolution` directions that fall inside B's bounding sphere are mapped
+!> to B's body frame and tested against r_B; the penetration of a point is r_B(y/|y|) - |y| (radial,
+!> in mm). In non-periodic boxes every surface point must lie inside the box.
+!>
+!> Bounding radii are the largest sampled radius on a grid twice as fine, times 1.02 (a safety
+!> margin much larger than the variation of r between samples at the orders used).
+!>
+!> Usage:
+!>     call verify_model(model, 120, report)
+module anm_audit_verify
+   use anm_core_kinds, only: wp, pi, i8
+   use anm_sh_expansion, only: sh_expansion_type, sh_truncate
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
+   use anm_io_model, only: model_type
+   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   implicit none
+   private
+
+   public :: verify_report_type, verify_model
+
+   !> Result of an audit.
+   type :: verify_report_type
+      !> Pairs whose bounding spheres intersect (checked by sampling).
+      integer(i8) :: pairs_checked = 0
+      !> Pairs with a penetration above the tolerance.
+      integer(i8) :: overlapping_pairs = 0
+      !> Particles crossing a wall (non-periodic boxes).
+      integer :: wall_violations = 0
+      !> Largest penetration found (mm), between particles or through a wall.
+      real(wp) :: max_depth = 0.0_wp
+      !> Particles of the worst pair between particles (0 if none).
+      integer :: worst(2) = 0
+      !> Tolerance used (mm).
+      real(wp) :: tolerance = 0.0_wp
+      !> Directions sampled per particle.
+      integer :: samples = 0
+   end type verify_report_type
+
+   !> Per (shape, order): sampled surface and bounding radius (shape units).
+   type :: sampled_type
+      integer :: shape = 0, order = -1
+      type(sh_expansion_type) :: s
+      real(wp), allocatable :: x(:, :)   ! (3, nsample) surface points
+      real(wp) :: rmax = 0.0_wp
+   end type sampled_type
+
+contains
+
+   !> Audit `model` at `resolution` polar samples; penetrations deeper than `tolerance` mm
+   !> (default 1e-4 of the smallest sieve width) count as overlaps.
+   subroutine verify_model(model, resolution, report, tolerance)
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Polar samples per particle (azimuthal: twice as many).
+      integer, intent(in) :: resolution
+      !> Result.
+      type(verify_report_type), intent(out) :: report
+      !> Tolerance (mm).
+      real(wp), intent(in), optional :: tolerance
+      type(sampled_type), allocatable :: samp(:)
+      integer, allocatable :: key(:)
+      real(wp), allocatable :: rho(:)
+      type(cell_list_type) :: cl
+      integer :: p, k, nkey
+      integer(i8) :: npairs, nover
+      real(wp) :: depth_max, worst_depth
+      integer :: nwall
+
+      report%samples = resolution * 2 * resolution
+      if (present(tolerance)) then
+         report%tolerance = tolerance
+      else if (allocated(model%min_width)) then
+         report%tolerance = 1.0e-4_wp * minval(model%min_width)
+      end if
+      ! distinct (shape, order) pairs
+      allocate (key(model%np), samp(model%np))
+      nkey = 0
+      do p = 1, model%np
+         key(p) = 0
+         do k = 1, nkey
+            if (samp(k)%shape == model%shape(p) .and. samp(k)%order == model%nmax(p)) then
+               key(p) = k
+               exit
+            end if
+         end do
+         if (key(p) == 0) then
+            nkey = nkey + 1
+            samp(nkey)%shape = model%shape(p)
+            samp(nkey)%order = model%nmax(p)
+            key(p) = nkey
+         end if
+      end do
+      !$omp parallel do default(none) shared(samp, nkey, model, resolution) private(k) schedule(dynamic)
+      do k = 1, nkey
+         call sample_shape(model%shapes(samp(k)%shape), samp(k)%order, resolution, samp(k))
+      end do
+      !$omp end parallel do
+      allocate (rho(model%np))
+      do p = 1, model%np
+         rho(p) = samp(key(p))%rmax * model%scale(p)
+      end do
+      call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp))
+      do p = 1, model%np
+         call cl%insert(p, wrap(model%center(:, p)), rho(p))
+      end do
+      npairs = 0
+      nover = 0
+      depth_max = 0.0_wp
+      worst_depth = 0.0_wp
+      nwall = 0
+      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth) private(p) &
+      !$omp& reduction(+:npairs, nover, nwall) reduction(max:depth_max)
+      block
+         integer, allocatable :: cand(:)
+         real(wp), allocatable :: shift(:, :)
+         real(wp), allocatable :: cw(:, :)
+         integer :: ncand, i, q
+         real(wp) :: d, dw
+         allocate (cw(3, model%np))
+         do i = 1, model%np
+            cw(:, i) = wrap(model%center(:, i))
+         end do
+         !$omp do schedule(dynamic, 16)
+         do p = 1, model%np
+            if (.not. model%periodic) then
+               dw = wall_depth(p)
+               if (dw > report%tolerance) nwall = nwall + 1
+               if (dw > depth_max) depth_max = dw
+            end if
+            call cl%query(cw(:, p), rho(p), cw, rho, cand, shift, ncand)
+            do i = 1, ncand
+               q = cand(i)
+               ! each pair once: (p, q + s) and (q, p - s) are the same pair; a particle may meet
+               ! its own periodic image in a box smaller than twice its size
+               if (q < p) cycle
+               if (q == p) then
+                  if (all(shift(:, i) == 0.0_wp)) cycle
+                  if (.not. positive(shift(:, i))) cycle
+               end if
+               npairs = npairs + 1
+               d = max(pair_depth(p, cw(:, p), q, cw(:, q) + shift(:, i)), &
+                       pair_depth(q, cw(:, q) + shift(:, i), p, cw(:, p)))
+               if (d > report%tolerance) nover = nover + 1
+               if (d > depth_max) then
+                  depth_max = d
+                  !$omp critical (verify_worst)
+                  if (d > worst_depth) then
+                     worst_depth = d
+                     report%worst = [p, q]
+                  end if
+                  !$omp end critical (verify_worst)
+               end if
+            end do
+         end do
+         !$omp end do
+      end block
+      !$omp end parallel
+      report%pairs_checked = npairs
+      report%overlapping_pairs = nover
+      report%wall_violations = nwall
+      report%max_depth = depth_max
+   contains
+      pure logical function positive(v)
+         real(wp), intent(in) :: v(3)
+         positive = v(1) > 0.0_wp .or. (v(1) == 0.0_wp .and. (v(2) > 0.0_wp .or. (v(2) == 0.0_wp .and. v(3) > 0.0_wp)))
+      end function positive
+
+      pure function wrap(c) result(w)
+         real(wp), intent(in) :: c(3)
+         real(wp) :: w(3)
+         if (model%periodic) then
+            w = modulo(c, model%box)
+         else
+            w = c
+         end if
+      end function wrap
+
+      !> Largest radial penetration of A's sampled surface points into B (mm), 0 if none.
+      function pair_depth(a, ca, b, cb) result(depth)
+         integer, intent(in) :: a, b
+         real(wp), intent(in) :: ca(3), cb(3)
+         real(wp) :: depth, x(3), y(3), ly, rb2, sa, sb
+         integer :: k
+         depth = 0.0_wp
+         sa = model%scale(a)
+         sb = model%scale(b)
+         rb2 = rho(b)**2
+         associate (sp => samp(key(a)), sq => samp(key(b)))
+            do k = 1, size(sp%x, 2)
+               x = ca + sa * matmul(model%rotation(:, :, a), sp%x(:, k))
+               if (sum((x - cb)**2) >= rb2) cycle
+               y = matmul(x - cb, model%rotation(:, :, b)) / sb
+               ly = norm2(y)
+               if (ly == 0.0_wp) then
+                  depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
+               else
+                  depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
+               end if
+            end do
+         end associate
+      end function pair_depth
+
+      !> How far the sampled surface of particle a leaves the box (mm), 0 if inside.
+      function wall_depth(a) result(depth)
+         integer, intent(in) :: a
+         real(wp) :: depth, x(3)
+         integer :: k
+         depth = 0.0_wp
+         associate (sp => samp(key(a)))
+            do k = 1, size(sp%x, 2)
+               x = model%center(:, a) + model%scale(a) * matmul(model%rotation(:, :, a), sp%x(:, k))
+               depth = max(depth, maxval(-x), maxval(x - model%box))
+            end do
+         end associate
+      end function wall_depth
+   end subroutine verify_model
+
+   subroutine sample_shape(shape, order, resolution, samp)
+      type(sh_expansion_type), intent(in) :: shape
+      integer, intent(in) :: order, resolution
+      type(sampled_type), intent(inout) :: samp
+      type(sh_grid_type) :: grid, fine
+      real(wp), allocatable :: r(:, :), rf(:, :)
+      integer :: i, j, k, nt, np
+      samp%s = sh_truncate(shape, order)
+      nt = resolution
+      np = 2 * resolution
+      grid = new_sh_grid(nt, np, max(1, samp%s%nmax))
+      allocate (r(nt, np), samp%x(3, nt * np + 2))
+      call sh_synthesize(grid, samp%s, r)
+      k = 0
+      do j = 1, np
+         do i = 1, nt
+            k = k + 1
+            samp%x(:, k) = r(i, j) * [grid%sphere%sint(i) * grid%trig(2, j), grid%sphere%sint(i) &
+                                      * grid%trig(grid%lmax + 2, j), grid%sphere%x(i)]
+         end do
+      end do
+      samp%x(:, k + 1) = samp%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]) * [0.0_wp, 0.0_wp, 1.0_wp]
+      samp%x(:, k + 2) = samp%s%radius_dir([0.0_wp, 0.0_wp, -1.0_wp]) * [0.0_wp, 0.0_wp, -1.0_wp]
+      fine = new_sh_grid(2 * nt, 4 * nt, max(1, samp%s%nmax))
+      allocate (rf(2 * nt, 4 * nt))
+      call sh_synthesize(fine, samp%s, rf)
+      samp%rmax = 1.02_wp * max(maxval(rf), maxval(r))
+   end subroutine sample_shape
+end module anm_audit_verify
