@@ -5,7 +5,7 @@ program anm
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
-   use anm_core_filesystem, only: join_path
+   use anm_core_filesystem, only: join_path, make_directory
    use anm_shapes_library, only: shape_set_type, load_shapes, synthetic_shapes
    use anm_shapes_synthetic, only: synthetic_params_type
    use anm_shapes_nist, only: write_nist_shape
@@ -236,7 +236,8 @@ contains
       end if
       call synthetic_shapes(par, int(seed, i8), count, set, error)
       if (allocated(error)) return
-      call execute_command_line("mkdir -p '"//dir//"'")
+      call make_directory(dir, error)
+      if (allocated(error)) return
       do k = 1, count
          call write_nist_shape(join_path(dir, set%names(k)%s), set%shapes(k), error)
          if (allocated(error)) return

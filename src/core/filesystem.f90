@@ -8,7 +8,7 @@ module anm_core_filesystem
    implicit none
    private
 
-   public :: list_directory, is_directory, join_path, base_name
+   public :: list_directory, is_directory, join_path, base_name, make_directory
 
    !> A variable-length string, element of name lists.
    type, public :: string_type
@@ -24,9 +24,26 @@ module anm_core_filesystem
          integer(c_int), value, intent(in) :: buflen
          integer(c_int) :: count
       end function c_list_dir
+      function c_make_directory(path) bind(c, name="anm_make_directory") result(stat)
+         import :: c_char, c_int
+         character(kind=c_char), intent(in) :: path(*)
+         integer(c_int) :: stat
+      end function c_make_directory
    end interface
 
 contains
+
+   !> Create a directory and its missing parents (like mkdir -p).
+   subroutine make_directory(path, error)
+      !> Directory path.
+      character(len=*), intent(in) :: path
+      !> Error naming the path.
+      type(error_type), allocatable, intent(out) :: error
+      integer(c_int) :: stat
+      stat = c_make_directory(trim(path)//c_null_char)
+      if (stat /= 0) call fatal_error(error, trim(path)//": cannot create directory (errno "// &
+                                      char(48 + mod(stat / 10, 10))//char(48 + mod(stat, 10))//")", error_code%io)
+   end subroutine make_directory
 
    !> Names in directory `dir`, sorted, hidden entries (leading '.') skipped.
    subroutine list_directory(dir, names, error)
