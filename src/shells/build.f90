@@ -31,7 +31,7 @@ module anm_shells_build
    real(wp), parameter :: default_fit_tol = 1.0e-3_wp
    !> Largest accepted fit residual relative to t: above it build_shell fails (the dilated body has
    !> creases in concave regions, which a smooth fit resolves only slowly with the order).
-   real(wp), parameter :: max_fit_residual = 0.25_wp
+   real(wp), parameter :: max_fit_residual = 0.5_wp
 
    !> What happened while building one shell (lengths in shape units).
    type :: shell_report_type
