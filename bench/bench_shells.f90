@@ -1,0 +1,63 @@
+!> Benchmark of shell construction (one thread): time per shell on the 120 x 240 Gauss grid for
+!> real particles (MA111-7-coarse, truncated at degree 14) and thicknesses of 0.1 %, 2 % and 10 %
+!> of the particle length, with the Newton/fallback counts, the fitted order and residual.
+!> Run: bash scripts/bench.sh (see docs/performance.md). Argument: the shapes folder
+!> (default ../shared/shapes/MA111-7-coarse).
+program bench_shells
+   use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use anm_core_kinds, only: wp, i8
+   use anm_core_error, only: error_type
+   use anm_sh_expansion, only: sh_expansion_type, sh_truncate
+   use anm_shapes_library, only: shape_set_type, load_shapes
+   use anm_geometry_properties, only: shape_geometry_type, compute_geometry
+   use anm_shells_build, only: shell_report_type, build_shell
+   implicit none
+   integer, parameter :: degree = 14, nshape = 4, nrep = 3
+   real(wp), parameter :: fractions(3) = [0.001_wp, 0.02_wp, 0.10_wp]
+   type(shape_set_type) :: set
+   type(error_type), allocatable :: error
+   type(sh_expansion_type) :: s, outer
+   type(shape_geometry_type) :: geom
+   type(shell_report_type) :: rep
+   character(len=512) :: folder
+   real(wp) :: t0, best
+   integer :: k, f, r
+
+   folder = "../shared/shapes/MA111-7-coarse"
+   if (command_argument_count() >= 1) call get_command_argument(1, folder)
+   call load_shapes(trim(folder), set, error)
+   if (allocated(error)) then
+      write (error_unit, '(a)') error%message
+      error stop 1
+   end if
+   write (output_unit, '(a)') "# shell construction, 1 thread, degree 14, 120 x 240 grid; best of 3"
+   write (output_unit, '(a)') "# shape                          t/L      ms  newton fallback order   residual/t"
+   do k = 1, min(nshape, size(set%shapes))
+      s = sh_truncate(set%shapes(k), degree)
+      call compute_geometry(s, geom)
+      do f = 1, size(fractions)
+         best = huge(1.0_wp)
+         do r = 1, nrep
+            t0 = wall()
+            call build_shell(s, fractions(f) * geom%length, outer, rep, error, label=set%names(k)%s)
+            best = min(best, wall() - t0)
+            if (allocated(error)) then
+               write (error_unit, '(a)') error%message
+               error stop 1
+            end if
+         end do
+         write (output_unit, '(a30,f7.3,f9.2,2i8,i6,es12.3)') set%names(k)%s, fractions(f), 1.0e3_wp * best, &
+            rep%newton, rep%fallback, rep%order, rep%fit_residual / rep%thickness
+      end do
+   end do
+
+contains
+
+   !> Wall-clock seconds.
+   function wall() result(sec)
+      real(wp) :: sec
+      integer(i8) :: c, rate
+      call system_clock(c, rate)
+      sec = real(c, wp) / real(rate, wp)
+   end function wall
+end program bench_shells

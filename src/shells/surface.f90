@@ -1,0 +1,382 @@
+!> Per-shape surface data for shell construction: a pointwise evaluator of r and its first and
+!> second angular derivatives, a dense sample of surface points and normals on a Gauss grid, and
+!> the distance from a point to the particle surface (the definition of a shell).
+!>
+!> The distance query uses the star shape: a surface point x within distance D of a point y
+!> (|y| > D) lies in the cone of half-angle asin(D/|y|) about y, so only the grid samples in that
+!> spherical cap are examined. The discrete local minima of |y - x_s| in the cap are refined by a
+!> Newton minimisation of |y - x(theta, phi)|^2 on the exact expansion.
+!>
+!> Usage:
+!>     call new_shell_surface(surf, shape, 120)
+!>     call surface_distance(surf, y, tcut, d, theta_c, phi_c)   ! d > tcut means "farther"
+!>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
+module anm_shells_surface
+   use anm_core_kinds, only: wp, pi, two_pi
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals
+   implicit none
+   private
+
+   public :: shell_surface_type, new_shell_surface, eval_surface, surface_frame, surface_distance, &
+      & closest_point, cross3
+
+   !> Immutable per-shape data (safe to share between threads).
+   type :: shell_surface_type
+      !> Particle expansion.
+      type(sh_expansion_type) :: shape
+      !> e_nm = sqrt((2n+1)(n^2-m^2)/(2n-1)), packed like the Legendre table (theta derivatives).
+      real(wp), allocatable :: enm(:)
+      !> Sample grid (its tables also serve the fit of the outer surface).
+      type(sh_grid_type) :: grid
+      !> Surface points x(3, ntheta, nphi) at the grid directions.
+      real(wp), allocatable :: x(:, :, :)
+      !> Outward unit normals at the samples.
+      real(wp), allocatable :: n(:, :, :)
+      !> Radii at the samples.
+      real(wp), allocatable :: r(:, :)
+      !> Largest distance between grid-adjacent samples (diagonals included).
+      real(wp) :: hmax = 0.0_wp
+      !> Largest sampled radius.
+      real(wp) :: rmax = 0.0_wp
+      !> Smallest sampled radius.
+      real(wp) :: rmin = 0.0_wp
+   end type shell_surface_type
+
+contains
+
+   !> Precompute the surface data of `shape` on an ntheta x 2 ntheta Gauss grid whose tables
+   !> support degree lmax (>= shape%nmax).
+   pure subroutine new_shell_surface(surf, shape, ntheta, lmax)
+      !> Surface data to build.
+      type(shell_surface_type), intent(out) :: surf
+      !> Particle expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      !> Polar nodes of the sample grid.
+      integer, intent(in) :: ntheta
+      !> Highest degree the grid tables must support.
+      integer, intent(in) :: lmax
+      integer :: n, m, k, i, j, nt, np, jn
+      real(wp) :: rn, rm, h
+
+      surf%shape = shape
+      allocate (surf%enm(size(shape%table%ca)))
+      surf%enm = 0.0_wp
+      do m = 0, shape%nmax
+         k = shape%table%idx(m)
+         do n = m, shape%nmax
+            rn = real(n, wp)
+            rm = real(m, wp)
+            if (n > m) surf%enm(k + n - m) = sqrt((2.0_wp * rn + 1.0_wp) * (rn * rn - rm * rm) / (2.0_wp * rn - 1.0_wp))
+         end do
+      end do
+      nt = ntheta
+      np = 2 * ntheta
+      surf%grid = new_sh_grid(nt, np, max(lmax, shape%nmax, 2))
+      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np))
+      call sh_grid_normals(surf%grid, shape, surf%x, surf%n)
+      h = 0.0_wp
+      do j = 1, np
+         jn = 1 + mod(j, np)
+         do i = 1, nt
+            surf%r(i, j) = norm2(surf%x(:, i, j))
+            h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i, jn)))
+            if (i < nt) then
+               h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i + 1, j)), norm2(surf%x(:, i, j) - surf%x(:, i + 1, jn)), &
+                       norm2(surf%x(:, i, jn) - surf%x(:, i + 1, j)))
+            end if
+         end do
+      end do
+      ! the polar caps: samples of the first and last rings are joined across the pole
+      do j = 1, np / 2
+         h = max(h, norm2(surf%x(:, 1, j) - surf%x(:, 1, j + np / 2)), norm2(surf%x(:, nt, j) - surf%x(:, nt, j + np / 2)))
+      end do
+      surf%hmax = h
+      surf%rmax = maxval(surf%r)
+      surf%rmin = minval(surf%r)
+   end subroutine new_shell_surface
+
+   !> r and its derivatives at (theta, phi): f = [r, r_t, r_p, r_tt, r_tp, r_pp] (t = theta,
+   !> p = phi, plain derivatives). sin(theta) may be negative (theta outside [0, pi]), which
+   !> continues the expansion consistently; |sin(theta)| must not be tiny (derivatives divide by it).
+   pure subroutine eval_surface(surf, theta, phi, f)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Polar angle and azimuth.
+      real(wp), intent(in) :: theta, phi
+      !> r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2.
+      real(wp), intent(out) :: f(6)
+      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+      real(wp) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, msq
+      real(wp) :: a0, b0, a1, b1, ann, bnn, rn
+      integer :: m, n, k0, nmax
+
+      x = cos(theta)
+      s = sin(theta)
+      cp = cos(phi)
+      sp = sin(phi)
+      inv_s = 1.0_wp / s
+      cots = x * inv_s
+      nmax = surf%shape%nmax
+      pmm = inv_sqrt_4pi
+      cm = 1.0_wp
+      sm = 0.0_wp
+      f = 0.0_wp
+      do m = 0, nmax
+         if (m > 0) then
+            pmm = -surf%shape%table%sect(m) * s * pmm
+            if (abs(pmm) < 1.0e-250_wp) exit
+            cnew = cm * cp - sm * sp
+            sm = sm * cp + cm * sp
+            cm = cnew
+         end if
+         k0 = surf%shape%table%idx(m)
+         ! n = m
+         p0 = 0.0_wp
+         p1 = pmm
+         d1 = m * x * p1 * inv_s
+         rn = real(m, wp)
+         a0 = surf%shape%a(m, m) * p1
+         b0 = surf%shape%b(m, m) * p1
+         a1 = surf%shape%a(m, m) * d1
+         b1 = surf%shape%b(m, m) * d1
+         ann = surf%shape%a(m, m) * rn * (rn + 1.0_wp) * p1
+         bnn = surf%shape%b(m, m) * rn * (rn + 1.0_wp) * p1
+         do n = m + 1, nmax
+            rn = real(n, wp)
+            if (n == m + 1) then
+               p2 = surf%shape%table%ca(k0 + 1) * x * p1
+            else
+               p2 = surf%shape%table%ca(k0 + n - m) * x * p1 - surf%shape%table%cb(k0 + n - m) * p0
+            end if
+            p0 = p1
+            p1 = p2
+            d1 = (rn * x * p1 - surf%enm(k0 + n - m) * p0) * inv_s
+            a0 = a0 + surf%shape%a(n, m) * p1
+            b0 = b0 + surf%shape%b(n, m) * p1
+            a1 = a1 + surf%shape%a(n, m) * d1
+            b1 = b1 + surf%shape%b(n, m) * d1
+            ann = ann + surf%shape%a(n, m) * rn * (rn + 1.0_wp) * p1
+            bnn = bnn + surf%shape%b(n, m) * rn * (rn + 1.0_wp) * p1
+         end do
+         msq = real(m * m, wp)
+         f(1) = f(1) + a0 * cm + b0 * sm
+         f(2) = f(2) + a1 * cm + b1 * sm
+         f(3) = f(3) + m * (b0 * cm - a0 * sm)
+         ! Legendre equation: P'' = -cot(theta) P' - (n(n+1) - m^2/sin^2) P
+         f(4) = f(4) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
+         f(5) = f(5) + m * (b1 * cm - a1 * sm)
+         f(6) = f(6) - msq * (a0 * cm + b0 * sm)
+      end do
+   end subroutine eval_surface
+
+   !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
+   !> x, x_t, x_p, x_tt, x_tp, x_pp (Cartesian, body frame).
+   pure subroutine surface_frame(theta, phi, f, x, xt, xp, xtt, xtp, xpp)
+      !> Direction.
+      real(wp), intent(in) :: theta, phi
+      !> r and derivatives from eval_surface.
+      real(wp), intent(in) :: f(6)
+      !> Point, first and second derivatives.
+      real(wp), intent(out) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3)
+      real(wp) :: st, ct, sp, cp, rh(3), th(3), ph(3), rho(3)
+      st = sin(theta)
+      ct = cos(theta)
+      sp = sin(phi)
+      cp = cos(phi)
+      rh = [st * cp, st * sp, ct]
+      th = [ct * cp, ct * sp, -st]
+      ph = [-sp, cp, 0.0_wp]
+      rho = [cp, sp, 0.0_wp]   ! = st rh + ct th
+      x = f(1) * rh
+      xt = f(2) * rh + f(1) * th
+      xp = f(3) * rh + f(1) * st * ph
+      xtt = (f(4) - f(1)) * rh + 2.0_wp * f(2) * th
+      xtp = f(5) * rh + f(3) * th + (f(2) * st + f(1) * ct) * ph
+      xpp = f(6) * rh + 2.0_wp * f(3) * st * ph - f(1) * st * rho
+   end subroutine surface_frame
+
+   !> Cross product.
+   pure function cross3(a, b) result(c)
+      !> Vectors.
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: c(3)
+      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+   end function cross3
+
+   !> Local minimisation of |y - x(theta, phi)| by Newton's method (Gauss-Newton with step
+   !> halving where the Hessian is not positive definite), from (theta, phi).
+   pure subroutine closest_point(surf, y, theta, phi, dist)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Point.
+      real(wp), intent(in) :: y(3)
+      !> Start on input, local minimiser on output.
+      real(wp), intent(inout) :: theta, phi
+      !> Distance |y - x(theta, phi)| at the minimiser.
+      real(wp), intent(out) :: dist
+      real(wp) :: f(6), x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3), d(3)
+      real(wp) :: h11, h12, h22, g1, g2, det, dt, dp, fval, fnew, tn, pn, lam
+      integer :: it, k
+      logical :: newton
+
+      call eval_surface(surf, theta, phi, f)
+      call surface_frame(theta, phi, f, x, xt, xp, xtt, xtp, xpp)
+      d = y - x
+      fval = dot_product(d, d)
+      do it = 1, 40
+         g1 = -dot_product(d, xt)
+         g2 = -dot_product(d, xp)
+         h11 = dot_product(xt, xt) - dot_product(d, xtt)
+         h12 = dot_product(xt, xp) - dot_product(d, xtp)
+         h22 = dot_product(xp, xp) - dot_product(d, xpp)
+         det = h11 * h22 - h12 * h12
+         newton = h11 > 0.0_wp .and. det > 1.0e-12_wp * h11 * max(h22, tiny(h22))
+         if (.not. newton) then
+            h11 = dot_product(xt, xt)
+            h12 = dot_product(xt, xp)
+            h22 = dot_product(xp, xp) + 1.0e-12_wp * h11
+            det = h11 * h22 - h12 * h12
+         end if
+         dt = -(h22 * g1 - h12 * g2) / det
+         dp = -(h11 * g2 - h12 * g1) / det
+         lam = min(1.0_wp, 0.3_wp / max(abs(dt), abs(dp), tiny(dt)))
+         do k = 1, 30
+            tn = theta + lam * dt
+            pn = phi + lam * dp
+            call eval_surface(surf, tn, pn, f)
+            call surface_frame(tn, pn, f, x, xt, xp, xtt, xtp, xpp)
+            d = y - x
+            fnew = dot_product(d, d)
+            if (fnew <= fval) exit
+            lam = 0.5_wp * lam
+         end do
+         if (fnew > fval) then
+            ! no decrease possible at rounding level: converged
+            call eval_surface(surf, theta, phi, f)
+            call surface_frame(theta, phi, f, x, xt, xp, xtt, xtp, xpp)
+            d = y - x
+            exit
+         end if
+         theta = tn
+         phi = pn
+         fval = fnew
+         if (lam * max(abs(dt), abs(dp)) < 1.0e-13_wp) exit
+      end do
+      dist = norm2(d)
+   end subroutine closest_point
+
+   !> Distance from y to the particle surface if it is below tcut: examines the samples in the
+   !> cone about y that can lie within tcut + hmax of y, refines every discrete local minimum of
+   !> the sample distance and returns the smallest. Returns dist = huge when no sample is within
+   !> tcut + hmax (then the true distance exceeds tcut). (theta_c, phi_c) is the closest point.
+   pure subroutine surface_distance(surf, y, tcut, dist, theta_c, phi_c, known)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Point (body frame), outside the particle.
+      real(wp), intent(in) :: y(3)
+      !> Distances above tcut need not be resolved.
+      real(wp), intent(in) :: tcut
+      !> Distance to the surface (or huge).
+      real(wp), intent(out) :: dist
+      !> Closest point's direction.
+      real(wp), intent(out) :: theta_c, phi_c
+      !> A known local minimiser of the distance (surface point): local minima of the samples
+      !> within 1.5 hmax of it are its own basin and are not refined (their sample distance counts).
+      real(wp), intent(in), optional :: known(3)
+      real(wp), allocatable :: w(:, :)
+      integer, allocatable :: jidx(:)
+      real(wp) :: ry, ty, py, reach, alpha, dphi, dth, width, dmin, th, ph, dloc, wc
+      integer :: nt, np, i0, i1, ncol, i, jj, j, a, b, ia, jb, j0
+      logical :: all_phi, is_min
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      dist = huge(1.0_wp)
+      theta_c = 0.0_wp
+      phi_c = 0.0_wp
+      ry = norm2(y)
+      reach = tcut + surf%hmax
+      dth = pi / nt * 2.0_wp
+      dphi = two_pi / np
+      if (reach >= 0.999_wp * ry) then
+         alpha = pi
+      else
+         alpha = asin(reach / ry)
+      end if
+      ty = acos(max(-1.0_wp, min(1.0_wp, y(3) / ry)))
+      py = atan2(y(2), y(1))
+      if (py < 0.0_wp) py = py + two_pi
+      i0 = nt + 1
+      i1 = 0
+      do i = 1, nt
+         if (abs(surf%grid%sphere%theta(i) - ty) <= alpha + dth) then
+            i0 = min(i0, i)
+            i1 = max(i1, i)
+         end if
+      end do
+      if (i1 < i0) return
+      all_phi = ty - alpha - dth <= 0.0_wp .or. ty + alpha + dth >= pi
+      if (.not. all_phi) then
+         width = asin(min(1.0_wp, sin(alpha) / sin(ty))) + 2.0_wp * dphi
+         all_phi = width >= pi .or. sin(alpha) >= sin(ty)
+      end if
+      if (all_phi) then
+         ncol = np
+         j0 = 1
+         if (i0 == 1) i0 = 1
+      else
+         j0 = floor((py - width) / dphi) + 1
+         ncol = floor((py + width) / dphi) + 2 - j0
+      end if
+      allocate (w(i0:i1, ncol), jidx(ncol))
+      do jj = 1, ncol
+         jidx(jj) = 1 + modulo(j0 - 1 + jj - 1, np)
+         j = jidx(jj)
+         do i = i0, i1
+            w(i, jj) = norm2(y - surf%x(:, i, j))
+         end do
+      end do
+      dmin = huge(1.0_wp)
+      do jj = 1, ncol
+         do i = i0, i1
+            wc = w(i, jj)
+            if (wc >= reach) cycle
+            is_min = .true.
+            do b = -1, 1
+               jb = jj + b
+               if (all_phi) then
+                  jb = 1 + modulo(jb - 1, ncol)
+               else if (jb < 1 .or. jb > ncol) then
+                  cycle
+               end if
+               do a = -1, 1
+                  ia = i + a
+                  if (ia < i0 .or. ia > i1) cycle
+                  if (w(ia, jb) < wc) is_min = .false.
+               end do
+            end do
+            if (.not. is_min) cycle
+            th = surf%grid%sphere%theta(i)
+            ph = surf%grid%sphere%phi(jidx(jj))
+            if (present(known)) then
+               if (norm2(surf%x(:, i, jidx(jj)) - known) < 1.5_wp * surf%hmax) then
+                  if (wc < dmin) then
+                     dmin = wc
+                     theta_c = th
+                     phi_c = ph
+                  end if
+                  cycle
+               end if
+            end if
+            call closest_point(surf, y, th, ph, dloc)
+            if (dloc < dmin) then
+               dmin = dloc
+               theta_c = th
+               phi_c = ph
+            end if
+         end do
+      end do
+      dist = dmin
+   end subroutine surface_distance
+end module anm_shells_surface
