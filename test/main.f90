@@ -8,6 +8,7 @@ program tester
    use test_sh, only: collect_sh
    use test_shapes, only: collect_shapes
    use test_geometry, only: collect_geometry
+   use test_contact, only: collect_contact
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -15,7 +16,8 @@ program tester
    logical :: found
 
    suites = [new_testsuite("core", collect_core), new_testsuite("sh", collect_sh), &
-             new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry)]
+             new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
+             new_testsuite("contact", collect_contact)]
    npass = 0
    nfail = 0
    nskip = 0

@@ -62,7 +62,9 @@ module anm_contact_overlap
       !> Certified mode: "no contact" guaranteed (patch bounds, subdivision to `resolution`).
       logical :: certified = .false.
       !> Certified mode: patch size (radians) at which an undecided patch is reported as contact.
-      real(wp) :: resolution = 1.0e-4_wp
+      !> The default is the stored leaf size pi/64; finer values subdivide with the global Lipschitz
+      !> bound (cost grows like 1/resolution near contact).
+      real(wp) :: resolution = pi / 64.0_wp
       !> Newton-Raphson: number of fixed phi_1 values.
       integer :: nr_lines = 36
       !> Newton-Raphson: starting theta_1 values per line.
@@ -203,8 +205,8 @@ contains
    end function overlap_depth
 
    !> True if any part of the posed body touches or leaves the box [0, L]^3. "False" is
-   !> guaranteed by the certified patch bounds (undecided patches are subdivided down to 1e-7 rad
-   !> and then reported as touching).
+   !> guaranteed by the certified patch bounds: leaf patches still undecided are reported as
+   !> touching (a possible false positive within the leaf bound width of the wall).
    pure logical function body_crosses_walls(body, center, rot, scale, box_length) result(out)
       !> Body.
       type(contact_body_type), intent(in) :: body
@@ -435,7 +437,7 @@ contains
       integer :: i, j, stop_level
       stop_level = leaf_level
       if (params%certified) then
-         do while (pi / patch_rows(stop_level) > params%resolution .and. stop_level < 40)
+         do while (pi / patch_rows(stop_level) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. stop_level < 24)
             stop_level = stop_level + 1
          end do
       end if
@@ -474,14 +476,11 @@ contains
          found = .true.
          return
       end if
-      if (params%certified) then
-         if (l >= stop_level) then
-            found = .true.
-            return
-         end if
-      else if (l >= leaf_level) then
+      if (l >= stop_level) then
+         ! undecided at the finest level: scan at N_box; certified mode then reports contact
          call patch_rect(l, i, j, th0, th1, ph0, ph1)
          call scan_rect(a, b, ps, eob_lo, eob_hi, params%nbox, th0, th1, ph0, ph1, found)
+         if (params%certified) found = .true.
          return
       end if
       do dj = 0, 1
@@ -608,7 +607,7 @@ contains
       end if
       ub = min(ub, dot_product(cen, e) + rad)
       if (ub < thr) return
-      if (patch_rows(l) > 2**24) then
+      if (l >= leaf_level) then
          code = code_inside
          return
       end if
