@@ -11,6 +11,9 @@ program anm
    use anm_shapes_nist, only: write_nist_shape
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_cli_shape_table, only: write_geometry_header, write_geometry_row
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_shapes_library, only: load_shape_file
+   use anm_contact_studies, only: study_next, study_nbox
    implicit none
 
    character(len=*), parameter :: version = "0.1.0"
@@ -31,6 +34,8 @@ program anm
       call run_shape(error)
    case ("synth")
       call run_synth(error)
+   case ("study")
+      call run_study(error)
    case default
       call fatal_error(error, "unknown command '"//command//"' (try: anm --help)", error_code%value)
    end select
@@ -56,6 +61,9 @@ contains
          "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
          "        coefficient files DIR/synthetic-anm-NNNNN.dat; the spectrum parameters are", &
          "        described in docs/synthetic-shapes.md", &
+         "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]", &
+         "        EOB parameter studies (docs/contact.md): next = extent-box volume vs N_ext,", &
+         "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle", &
          "  --help, --version", &
          "", &
          "Environment: OMP_NUM_THREADS sets the number of threads."
@@ -235,4 +243,58 @@ contains
       end do
       write (output_unit, '(a)') "wrote "//to_string(count)//" synthetic shapes to "//dir
    end subroutine run_synth
+
+   subroutine run_study(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: kind, path, csv, arg
+      integer :: i, order, seed
+      type(sh_expansion_type) :: shape
+      order = -1
+      seed = 1
+      i = 2
+      do while (i <= command_argument_count())
+         arg = argument(i)
+         select case (arg)
+         case ("--csv")
+            if (i + 1 > command_argument_count()) then
+               call fatal_error(error, "option --csv needs a value", error_code%value)
+               return
+            end if
+            csv = argument(i + 1)
+            i = i + 1
+         case ("--order")
+            call int_option(i, "--order", order, error)
+         case ("--seed")
+            call int_option(i, "--seed", seed, error)
+         case default
+            if (arg(1:min(1, len(arg))) == "-") then
+               call fatal_error(error, "anm study: unknown option '"//arg//"'", error_code%value)
+            else if (.not. allocated(kind)) then
+               kind = arg
+            else if (.not. allocated(path)) then
+               path = arg
+            else
+               call fatal_error(error, "anm study: unexpected argument '"//arg//"'", error_code%value)
+            end if
+         end select
+         if (allocated(error)) return
+         i = i + 1
+      end do
+      if (.not. allocated(kind) .or. .not. allocated(path) .or. .not. allocated(csv)) then
+         call fatal_error(error, "anm study: usage: anm study next|nbox SHAPE_FILE --csv OUT", error_code%value)
+         return
+      end if
+      call load_shape_file(path, shape, error)
+      if (allocated(error)) return
+      select case (kind)
+      case ("next")
+         call study_next(shape, order, csv, error)
+      case ("nbox")
+         call study_nbox(shape, order, seed, csv, error)
+      case default
+         call fatal_error(error, "anm study: unknown study '"//kind//"' (next or nbox)", error_code%value)
+      end select
+      if (allocated(error)) return
+      write (output_unit, '(a)') "wrote "//csv
+   end subroutine run_study
 end program anm
