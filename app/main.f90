@@ -13,11 +13,18 @@ program anm
    use anm_cli_shape_table, only: write_geometry_header, write_geometry_row
    use anm_io_model, only: model_type, read_model
    use anm_audit_verify, only: verify_report_type, verify_model
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_shapes_library, only: load_shape_file
+   use anm_contact_studies, only: study_next, study_nbox
+   use anm_cli_run, only: run_job, anm_version
+   use omp_lib, only: omp_get_max_threads
    implicit none
 
-   character(len=*), parameter :: version = "0.1.0"
    character(len=:), allocatable :: command
    type(error_type), allocatable :: error
+   integer :: threads
+
+   threads = omp_get_max_threads()
 
    if (command_argument_count() < 1) then
       call usage(error_unit)
@@ -28,13 +35,21 @@ program anm
    case ("-h", "--help", "help")
       call usage(output_unit)
    case ("--version")
-      write (output_unit, '(a)') "anm "//version
+      write (output_unit, '(a)') "anm "//anm_version
    case ("shape")
       call run_shape(error)
    case ("synth")
       call run_synth(error)
    case ("verify")
       call run_verify(error)
+   case ("study")
+      call run_study(error)
+   case ("run")
+      if (command_argument_count() /= 2) then
+         call fatal_error(error, "usage: anm run FILE.nml", error_code%value)
+      else
+         call run_job(argument(2), output_unit, error_unit, error, threads)
+      end if
    case default
       call fatal_error(error, "unknown command '"//command//"' (try: anm --help)", error_code%value)
    end select
@@ -51,6 +66,9 @@ contains
          "usage: anm COMMAND [ARGS]", &
          "", &
          "commands:", &
+         "  run FILE.nml", &
+         "        build a model as the namelist says (docs/namelist.md): model file, summary table", &
+         "        (stdout and CSV) and VRML in the output directory; progress on stderr", &
          "  shape FILE|DIR [--order N] [--next N]", &
          "        geometry table (NIST columns) of one coefficient file or of every *.dat in DIR,", &
          "        computed at expansion order N (default: all coefficients); --next N uses the", &
@@ -64,6 +82,9 @@ contains
          "        audit a model independently of the parking path: every neighbouring pair (periodic", &
          "        images included) and the walls, by dense point sampling (N x 2N directions per", &
          "        particle, default 120); exits with status 3 if any penetration exceeds the tolerance", &
+         "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]", &
+         "        EOB parameter studies (docs/contact.md): next = extent-box volume vs N_ext,", &
+         "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle", &
          "  --help, --version", &
          "", &
          "Environment: OMP_NUM_THREADS sets the number of threads."
@@ -244,6 +265,7 @@ contains
       end do
       write (output_unit, '(a)') "wrote "//to_string(count)//" synthetic shapes to "//dir
    end subroutine run_synth
+
    subroutine run_verify(error)
       type(error_type), allocatable, intent(out) :: error
       character(len=:), allocatable :: path, arg
@@ -307,4 +329,57 @@ contains
       end if
       write (output_unit, '(a)') "  result: OK"
    end subroutine run_verify
+   subroutine run_study(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: kind, path, csv, arg
+      integer :: i, order, seed
+      type(sh_expansion_type) :: shape
+      order = -1
+      seed = 1
+      i = 2
+      do while (i <= command_argument_count())
+         arg = argument(i)
+         select case (arg)
+         case ("--csv")
+            if (i + 1 > command_argument_count()) then
+               call fatal_error(error, "option --csv needs a value", error_code%value)
+               return
+            end if
+            csv = argument(i + 1)
+            i = i + 1
+         case ("--order")
+            call int_option(i, "--order", order, error)
+         case ("--seed")
+            call int_option(i, "--seed", seed, error)
+         case default
+            if (arg(1:min(1, len(arg))) == "-") then
+               call fatal_error(error, "anm study: unknown option '"//arg//"'", error_code%value)
+            else if (.not. allocated(kind)) then
+               kind = arg
+            else if (.not. allocated(path)) then
+               path = arg
+            else
+               call fatal_error(error, "anm study: unexpected argument '"//arg//"'", error_code%value)
+            end if
+         end select
+         if (allocated(error)) return
+         i = i + 1
+      end do
+      if (.not. allocated(kind) .or. .not. allocated(path) .or. .not. allocated(csv)) then
+         call fatal_error(error, "anm study: usage: anm study next|nbox SHAPE_FILE --csv OUT", error_code%value)
+         return
+      end if
+      call load_shape_file(path, shape, error)
+      if (allocated(error)) return
+      select case (kind)
+      case ("next")
+         call study_next(shape, order, csv, error)
+      case ("nbox")
+         call study_nbox(shape, order, seed, csv, error)
+      case default
+         call fatal_error(error, "anm study: unknown study '"//kind//"' (next or nbox)", error_code%value)
+      end select
+      if (allocated(error)) return
+      write (output_unit, '(a)') "wrote "//csv
+   end subroutine run_study
 end program anm

@@ -10,3 +10,4 @@ fpm build --profile release --flag "$ANM_FFLAGS" >/dev/null 2>&1
 echo "# machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
 OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-sh 2>/dev/null
 OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-shells 2>/dev/null
+OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-contact 2>/dev/null

@@ -11,6 +11,7 @@ program tester
    use test_io, only: collect_io
    use test_parking, only: collect_parking
    use test_shells, only: collect_shells
+   use test_contact, only: collect_contact
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -20,7 +21,8 @@ program tester
    suites = [new_testsuite("core", collect_core), new_testsuite("sh", collect_sh), &
              new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
              new_testsuite("io", collect_io), new_testsuite("parking", collect_parking), &
-             new_testsuite("shells", collect_shells)]
+             new_testsuite("shells", collect_shells), &
+             new_testsuite("contact", collect_contact)]
    npass = 0
    nfail = 0
    nskip = 0

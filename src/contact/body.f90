@@ -1,0 +1,348 @@
+!> Per-shape contact data: the truncated expansion, certified bounds of r over a hierarchy of
+!> angular patches, guaranteed bounding radii and extent boxes.
+!>
+!> Patches are latitude-longitude rectangles. Level l has nt = 4 2^l rows in theta and
+!> np = 8 2^l columns in phi; levels 0..`leaf_level` are stored, finer levels are generated on the
+!> fly by the contact test (same indexing). Each stored patch carries a cap (centre direction,
+!> half-angle alpha) that contains it, certified r_min <= r <= r_max over the patch, and a ball
+!> that contains the solid shell sector {rho u : u in cap, r_min <= rho <= r_max}.
+!>
+!> Certification (docs/contact.md). r is sampled with its gradient on the regular grid
+!> theta_i = i pi/nt_g, phi_j = 2 pi j/np_g (nt_g = 8 nt_leaf, np_g = 8 np_leaf). The restriction
+!> of a degree-N expansion to any great circle is a trigonometric polynomial of degree <= N, so by
+!> Bernstein's inequality, with M = max |r - c| over the sphere for any constant c,
+!>     |dr/ds| <= N M (Lipschitz bound G) and |d2r/ds2| <= N^2 M (curvature bound H)
+!> along every great circle (s = arc length). Every point of a grid cell is within
+!> d_c = (dtheta + sin_max dphi)/2 of one of its corners, so over the cell
+!>     r <= max_k (r_k + |grad r_k| d_c) + H d_c^2 / 2,   r >= min_k (r_k - |grad r_k| d_c) - H d_c^2 / 2.
+!> M itself is certified from the samples: with M_s = max |r_k - c| and d = max d_c,
+!> M <= M_s + G d = M_s + N M d, so M <= M_s / (1 - N d) (requires N d < 1).
+!>
+!> Usage:
+!>     call new_contact_body(body, shape, error, nused=14)
+!>     ! body%r_max, body%box_lo/box_hi (certified), body%ext_lo/ext_hi (thesis N_ext scan)
+module anm_contact_body
+   use anm_core_kinds, only: wp, pi, two_pi
+   use anm_core_error, only: error_type, fatal_error, error_code
+   use anm_core_strings, only: to_string
+   use anm_sh_expansion, only: sh_expansion_type, sh_truncate
+   use anm_sh_legendre, only: legendre_values, legendre_theta_derivatives, packed_size
+   use anm_geometry_extent, only: extent_scan
+   implicit none
+   private
+
+   public :: contact_body_type, new_contact_body, leaf_level, patch_rows, patch_cols, patch_index, &
+      & patch_cap, sector_ball, default_next
+
+   !> Finest stored patch level (64 x 128 patches of pi/64 rad).
+   integer, parameter :: leaf_level = 4
+   !> Grid cells per leaf patch edge used to certify the bounds.
+   integer, parameter :: cells_per_leaf = 8
+   !> Thesis default N_ext.
+   integer, parameter :: default_next = 40
+
+   !> Immutable per-(shape, order) contact data, shared by all particles of that shape and by all
+   !> threads.
+   type :: contact_body_type
+      !> Expansion truncated to the order used.
+      type(sh_expansion_type) :: shape
+      !> Order used.
+      integer :: nmax = -1
+      !> Certified upper bound of r over the sphere (shape units).
+      real(wp) :: r_max = 0.0_wp
+      !> Certified lower bound of r over the sphere (shape units).
+      real(wp) :: r_min = 0.0_wp
+      !> Certified Lipschitz bound of r along great circles, N M (shape units per radian).
+      real(wp) :: lipschitz = 0.0_wp
+      !> Certified bound of |d2r/ds2| along great circles, N^2 M.
+      real(wp) :: curvature = 0.0_wp
+      !> Guaranteed extent box (body frame): every surface point lies inside [box_lo, box_hi].
+      real(wp) :: box_lo(3) = 0.0_wp, box_hi(3) = 0.0_wp
+      !> Thesis extent box from the N_ext angular scan (slightly inside the true box).
+      real(wp) :: ext_lo(3) = 0.0_wp, ext_hi(3) = 0.0_wp
+      !> N_ext used for ext_lo/ext_hi.
+      integer :: next = default_next
+      !> Offset of level l in the patch arrays (patch k of level l is off(l) + k).
+      integer :: off(0:leaf_level + 1) = 0
+      !> Cap centre direction of each patch (3, npatch).
+      real(wp), allocatable :: dir(:, :)
+      !> cos and sin of the cap half-angle.
+      real(wp), allocatable :: cosa(:), sina(:)
+      !> Certified bounds of r over the patch.
+      real(wp), allocatable :: rlo(:), rhi(:)
+      !> Ball containing the shell sector: centre (3, npatch) and radius.
+      real(wp), allocatable :: ball(:, :), brad(:)
+   end type contact_body_type
+
+contains
+
+   !> Patch rows (theta) at level l.
+   elemental function patch_rows(l) result(n)
+      !> Level.
+      integer, intent(in) :: l
+      integer :: n
+      n = 4 * 2**l
+   end function patch_rows
+
+   !> Patch columns (phi) at level l.
+   elemental function patch_cols(l) result(n)
+      !> Level.
+      integer, intent(in) :: l
+      integer :: n
+      n = 8 * 2**l
+   end function patch_cols
+
+   !> Storage index of patch (i, j) of a stored level l.
+   pure function patch_index(body, l, i, j) result(k)
+      !> Body.
+      type(contact_body_type), intent(in) :: body
+      !> Level, theta row 1..patch_rows(l), phi column 1..patch_cols(l).
+      integer, intent(in) :: l, i, j
+      integer :: k
+      k = body%off(l) + (j - 1) * patch_rows(l) + i
+   end function patch_index
+
+   !> Cap containing the rectangle [th0, th1] x [ph0, ph1] (ph1 - ph0 <= pi/2): centre direction
+   !> at the mid angles, half-angle the largest angle to a corner (along edges of such rectangles
+   !> the angle to the centre is largest at the corners), plus a rounding margin.
+   pure subroutine patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
+      !> Polar range and azimuth range (radians).
+      real(wp), intent(in) :: th0, th1, ph0, ph1
+      !> Centre direction.
+      real(wp), intent(out) :: dir(3)
+      !> cos and sin of the half-angle.
+      real(wp), intent(out) :: cosa, sina
+      real(wp) :: tm, pm, c, cmin
+      tm = 0.5_wp * (th0 + th1)
+      pm = 0.5_wp * (ph0 + ph1)
+      dir = [sin(tm) * cos(pm), sin(tm) * sin(pm), cos(tm)]
+      cmin = 1.0_wp
+      c = cos(tm) * cos(th0) + sin(tm) * sin(th0) * cos(0.5_wp * (ph1 - ph0))
+      cmin = min(cmin, c)
+      c = cos(tm) * cos(th1) + sin(tm) * sin(th1) * cos(0.5_wp * (ph1 - ph0))
+      cmin = min(cmin, c)
+      ! rounding margin of 1e-12 rad on the half-angle
+      cosa = max(-1.0_wp, min(1.0_wp, cmin))
+      sina = sqrt(max(0.0_wp, 1.0_wp - cosa**2))
+      c = cosa * cos(1.0e-12_wp) - sina * sin(1.0e-12_wp)
+      sina = sina * cos(1.0e-12_wp) + cosa * sin(1.0e-12_wp)
+      cosa = c
+   end subroutine patch_cap
+
+   !> Ball containing {rho u : angle(u, dir) <= alpha, rlo <= rho <= rhi}: centre on the axis at
+   !> (rlo cos alpha + rhi)/2; the farthest points are on the rim circles.
+   pure subroutine sector_ball(dir, cosa, sina, rlo, rhi, center, radius)
+      !> Cap direction.
+      real(wp), intent(in) :: dir(3)
+      !> cos, sin of the cap half-angle.
+      real(wp), intent(in) :: cosa, sina
+      !> Radial range (rlo >= 0).
+      real(wp), intent(in) :: rlo, rhi
+      !> Ball centre.
+      real(wp), intent(out) :: center(3)
+      !> Ball radius.
+      real(wp), intent(out) :: radius
+      real(wp) :: rm, lo
+      lo = max(0.0_wp, rlo)
+      rm = 0.5_wp * (lo * max(cosa, 0.0_wp) + rhi)
+      center = rm * dir
+      radius = max(sqrt(max(0.0_wp, rhi**2 + rm**2 - 2.0_wp * rhi * rm * cosa)), &
+                   sqrt(max(0.0_wp, lo**2 + rm**2 - 2.0_wp * lo * rm * cosa)), abs(rm - lo), rhi - rm)
+      radius = radius * (1.0_wp + 4.0_wp * epsilon(1.0_wp)) + 4.0_wp * epsilon(1.0_wp) * rhi
+   end subroutine sector_ball
+
+   !> Build the contact data of `shape` truncated to order `nused` (default: all of it).
+   subroutine new_contact_body(body, shape, error, nused, next)
+      !> Contact data to build.
+      type(contact_body_type), intent(out) :: body
+      !> Star-shaped surface r(theta, phi) (a particle, or a particle-plus-shell outer surface).
+      type(sh_expansion_type), intent(in) :: shape
+      !> Error when the shape is not star-shaped (certified r_min <= 0) or too rough for the grid.
+      type(error_type), allocatable, intent(out) :: error
+      !> Order used (default: shape%nmax).
+      integer, intent(in), optional :: nused
+      !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
+      integer, intent(in), optional :: next
+      real(wp), allocatable :: rg(:, :), gg(:, :), clo(:, :), chi(:, :)
+      integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc
+      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu
+      real(wp) :: e(3)
+
+      if (present(nused)) then
+         body%shape = sh_truncate(shape, nused)
+      else
+         body%shape = sh_truncate(shape, shape%nmax)
+      end if
+      n = body%shape%nmax
+      body%nmax = n
+      if (present(next)) body%next = max(2, next)
+      nleaf_t = patch_rows(leaf_level)
+      nleaf_p = patch_cols(leaf_level)
+      ntg = cells_per_leaf * nleaf_t
+      npg = cells_per_leaf * nleaf_p
+      dth = pi / ntg
+      dph = two_pi / npg
+      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg))
+      call synthesize_regular(body%shape, ntg, npg, rg, gg)
+      smin = minval(rg)
+      smax = maxval(rg)
+      ms = 0.5_wp * (smax - smin)
+      dmax = 0.5_wp * (dth + dph)
+      if (n * dmax >= 0.5_wp) then
+         call fatal_error(error, "contact body: order "//to_string(n)//" too high for the certification grid", &
+                          error_code%value)
+         return
+      end if
+      mm = ms / (1.0_wp - n * dmax) * (1.0_wp + 1.0e-12_wp) + 1.0e-14_wp * smax
+      if (n == 0) mm = 0.0_wp
+      body%lipschitz = n * mm
+      body%curvature = real(n, wp)**2 * mm
+      ! cell bounds
+      allocate (clo(ntg, npg), chi(ntg, npg))
+      do ic = 1, ntg
+         if ((ic - 1) * dth <= 0.5_wp * pi .and. ic * dth >= 0.5_wp * pi) then
+            smx = 1.0_wp
+         else
+            smx = max(sin((ic - 1) * dth), sin(ic * dth))
+         end if
+         dc = 0.5_wp * (dth + smx * dph)
+         do jc = 1, npg
+            hi = max(rg(ic - 1, jc - 1) + gg(ic - 1, jc - 1) * dc, rg(ic, jc - 1) + gg(ic, jc - 1) * dc, &
+                     rg(ic - 1, jc) + gg(ic - 1, jc) * dc, rg(ic, jc) + gg(ic, jc) * dc)
+            lo = min(rg(ic - 1, jc - 1) - gg(ic - 1, jc - 1) * dc, rg(ic, jc - 1) - gg(ic, jc - 1) * dc, &
+                     rg(ic - 1, jc) - gg(ic - 1, jc) * dc, rg(ic, jc) - gg(ic, jc) * dc)
+            chi(ic, jc) = hi + 0.5_wp * body%curvature * dc**2
+            clo(ic, jc) = lo - 0.5_wp * body%curvature * dc**2
+         end do
+      end do
+      ! patch storage
+      np_tot = 0
+      do l = 0, leaf_level
+         body%off(l) = np_tot
+         np_tot = np_tot + patch_rows(l) * patch_cols(l)
+      end do
+      body%off(leaf_level + 1) = np_tot
+      allocate (body%dir(3, np_tot), body%cosa(np_tot), body%sina(np_tot), body%rlo(np_tot), body%rhi(np_tot), &
+                body%ball(3, np_tot), body%brad(np_tot))
+      do l = leaf_level, 0, -1
+         kc = cells_per_leaf * 2**(leaf_level - l)
+         do j = 1, patch_cols(l)
+            do i = 1, patch_rows(l)
+               k = patch_index(body, l, i, j)
+               if (l == leaf_level) then
+                  body%rlo(k) = minval(clo((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+                  body%rhi(k) = maxval(chi((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+               else
+                  body%rlo(k) = min(body%rlo(patch_index(body, l + 1, 2 * i - 1, 2 * j - 1)), &
+                                    body%rlo(patch_index(body, l + 1, 2 * i, 2 * j - 1)), &
+                                    body%rlo(patch_index(body, l + 1, 2 * i - 1, 2 * j)), &
+                                    body%rlo(patch_index(body, l + 1, 2 * i, 2 * j)))
+                  body%rhi(k) = max(body%rhi(patch_index(body, l + 1, 2 * i - 1, 2 * j - 1)), &
+                                    body%rhi(patch_index(body, l + 1, 2 * i, 2 * j - 1)), &
+                                    body%rhi(patch_index(body, l + 1, 2 * i - 1, 2 * j)), &
+                                    body%rhi(patch_index(body, l + 1, 2 * i, 2 * j)))
+               end if
+               call patch_cap(pi * (i - 1) / patch_rows(l), pi * i / patch_rows(l), &
+                              two_pi * (j - 1) / patch_cols(l), two_pi * j / patch_cols(l), &
+                              body%dir(:, k), body%cosa(k), body%sina(k))
+               call sector_ball(body%dir(:, k), body%cosa(k), body%sina(k), body%rlo(k), body%rhi(k), &
+                                body%ball(:, k), body%brad(k))
+            end do
+         end do
+      end do
+      body%r_max = maxval(body%rhi(body%off(0) + 1:body%off(1)))
+      body%r_min = minval(body%rlo(body%off(0) + 1:body%off(1)))
+      if (body%r_min <= 0.0_wp) then
+         call fatal_error(error, "contact body: shape is not certified star-shaped (r_min bound " &
+                          //to_string(body%r_min)//" <= 0)", error_code%not_star)
+         return
+      end if
+      ! guaranteed box from the leaf sectors: max of x.e over a sector <= rho_max(u.e) * max_cap(u.e)
+      body%box_lo = huge(1.0_wp)
+      body%box_hi = -huge(1.0_wp)
+      do k = body%off(leaf_level) + 1, body%off(leaf_level + 1)
+         do i = 1, 3
+            e = 0.0_wp
+            do j = -1, 1, 2
+               e(i) = real(j, wp)
+               ang = acos(max(-1.0_wp, min(1.0_wp, dot_product(body%dir(:, k), e)))) - atan2(body%sina(k), body%cosa(k))
+               mu = cos(max(0.0_wp, ang))
+               if (mu >= 0.0_wp) then
+                  hi = body%rhi(k) * mu
+               else
+                  hi = body%rlo(k) * mu
+               end if
+               if (j > 0) then
+                  body%box_hi(i) = max(body%box_hi(i), hi)
+               else
+                  body%box_lo(i) = min(body%box_lo(i), -hi)
+               end if
+            end do
+         end do
+      end do
+      call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
+   end subroutine new_contact_body
+
+   !> r and |grad r| on the regular grid theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np
+   !> (j = 0..np, column np repeating column 0): per ring the sums over degree, then per azimuth
+   !> the sums over order with a cos/sin table.
+   pure subroutine synthesize_regular(shape, nt, np, r, g)
+      type(sh_expansion_type), intent(in) :: shape
+      integer, intent(in) :: nt, np
+      real(wp), intent(out) :: r(0:nt, 0:np), g(0:nt, 0:np)
+      real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :)
+      real(wp), allocatable :: ca(:), cb(:), da(:), db(:), ea(:), eb(:)
+      integer, allocatable :: idx_out(:)
+      integer :: nmax, i, j, m, n, k
+      real(wp) :: th, vr, vt, vp
+
+      nmax = shape%nmax
+      allocate (p(packed_size(nmax + 1)), dp(packed_size(nmax)), mps(packed_size(nmax)), idx_out(0:nmax))
+      allocate (cs(0:nmax, 0:np), sn(0:nmax, 0:np), ca(0:nmax), cb(0:nmax), da(0:nmax), db(0:nmax), &
+                ea(0:nmax), eb(0:nmax))
+      k = 1
+      do m = 0, nmax
+         idx_out(m) = k
+         k = k + nmax - m + 1
+      end do
+      do j = 0, np
+         do m = 0, nmax
+            cs(m, j) = cos(m * two_pi * mod(j, np) / np)
+            sn(m, j) = sin(m * two_pi * mod(j, np) / np)
+         end do
+      end do
+      do i = 0, nt
+         th = pi * i / nt
+         call legendre_values(shape%table, cos(th), p, sin(th))
+         call legendre_theta_derivatives(shape%table, p, nmax, idx_out, dp, mps)
+         do m = 0, nmax
+            ca(m) = 0.0_wp
+            cb(m) = 0.0_wp
+            da(m) = 0.0_wp
+            db(m) = 0.0_wp
+            ea(m) = 0.0_wp
+            eb(m) = 0.0_wp
+            do n = m, nmax
+               ca(m) = ca(m) + shape%a(n, m) * p(shape%table%idx(m) + n - m)
+               cb(m) = cb(m) + shape%b(n, m) * p(shape%table%idx(m) + n - m)
+               da(m) = da(m) + shape%a(n, m) * dp(idx_out(m) + n - m)
+               db(m) = db(m) + shape%b(n, m) * dp(idx_out(m) + n - m)
+               ea(m) = ea(m) + shape%a(n, m) * mps(idx_out(m) + n - m)
+               eb(m) = eb(m) + shape%b(n, m) * mps(idx_out(m) + n - m)
+            end do
+         end do
+         do j = 0, np
+            vr = 0.0_wp
+            vt = 0.0_wp
+            vp = 0.0_wp
+            do m = 0, nmax
+               vr = vr + ca(m) * cs(m, j) + cb(m) * sn(m, j)
+               vt = vt + da(m) * cs(m, j) + db(m) * sn(m, j)
+               vp = vp + eb(m) * cs(m, j) - ea(m) * sn(m, j)
+            end do
+            r(i, j) = vr
+            g(i, j) = sqrt(vt**2 + vp**2)
+         end do
+      end do
+   end subroutine synthesize_regular
+end module anm_contact_body

@@ -1,0 +1,666 @@
+!> Particle-particle and particle-wall contact tests (thesis sections 1.2, 2.2 and 2.5.1).
+!>
+!> EOB method, staged as the thesis' Fig 2.2 with cheap stages first:
+!>  1. bounding spheres (certified r_max: apart -> no contact) and inscribed spheres (certified
+!>     r_min: overlap -> contact);
+!>  2. overlap along the line of centres (two radius evaluations);
+!>  3. extent boxes in the world and their intersection, the EOB (empty -> no contact);
+!>  4. for each body, its surface is tested against the other body through the patch hierarchy:
+!>     a patch whose shell-sector ball misses the EOB, or whose ball lies certainly outside the
+!>     other body (the other body's certified r over the ball's cap of directions), is pruned; a
+!>     ball certainly inside means contact; undecided leaf patches are scanned at N_box
+!>     resolution (default mode) or subdivided with certified bounds (certified mode). Both bodies
+!>     are scanned (a thin protrusion of B into A is invisible from A's surface alone).
+!> Each scanned surface point is tested against the other body along the ray to its centre.
+!>
+!> Certified mode: "no contact" is returned only when every patch was proven outside, so it is
+!> guaranteed (up to floating-point rounding); a pair still undecided when the patch size reaches
+!> `resolution` radians is reported as contact (possible false positive for gaps smaller than
+!> about (G_a s_a + G_b s_b + r_max s) * resolution, G the certified Lipschitz bound).
+!>
+!> Newton-Raphson method (thesis Eq 1.5, legacy baseline): phi_1 is fixed on `nr_lines` values;
+!> the remaining unknowns are eliminated by measuring the surface point of A along the ray from
+!> B's centre, g(theta_1) = |y| - r_B(y/|y|), solved by Newton from `nr_starts` starting points.
+!> A root is a common surface point; contact is reported when one is found (or when a centre
+!> lies inside the other body).
+!>
+!> Usage:
+!>     type(contact_params_type) :: params
+!>     hit = bodies_overlap(body_a, ca, rot_a, sa, body_b, cb, rot_b, sb, params)
+!>     depth = overlap_depth(body_a, ca, rot_a, sa, body_b, cb, rot_b, sb, params%nbox)
+!>     out = body_crosses_walls(body_a, ca, rot_a, sa, [lx, ly, lz])
+module anm_contact_overlap
+   use anm_core_kinds, only: wp, pi, two_pi
+   use anm_contact_body, only: contact_body_type, leaf_level, patch_rows, patch_cols, patch_index, &
+      & patch_cap, sector_ball, default_next
+   implicit none
+   private
+
+   public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
+      & point_inside
+
+   !> Contact methods.
+   type :: contact_method_enum
+      !> Extent overlap box with the patch hierarchy (default).
+      integer :: eob = 1
+      !> Legacy Newton-Raphson on Eq 1.5.
+      integer :: newton_raphson = 2
+   end type contact_method_enum
+
+   !> The contact methods, used as `contact_method%eob`.
+   type(contact_method_enum), parameter :: contact_method = contact_method_enum()
+
+   !> Parameters of the contact test.
+   type :: contact_params_type
+      !> Method, one of `contact_method`.
+      integer :: method = contact_method%eob
+      !> N_ext of the thesis extent boxes (bodies are built with it: new_contact_body(..., next=)).
+      integer :: next = default_next
+      !> N_box: scan points over the polar range pi (2 N_box over the azimuth range), i.e. scan
+      !> spacing pi/N_box rad; only patches the certified bounds leave undecided are scanned.
+      integer :: nbox = 128
+      !> Certified mode: "no contact" guaranteed (patch bounds, subdivision to `resolution`).
+      logical :: certified = .false.
+      !> Certified mode: patch size (radians) at which an undecided patch is reported as contact.
+      !> The default is the stored leaf size pi/64; finer values subdivide with the global Lipschitz
+      !> bound (cost grows like 1/resolution near contact).
+      real(wp) :: resolution = pi / 64.0_wp
+      !> Newton-Raphson: number of fixed phi_1 values.
+      integer :: nr_lines = 36
+      !> Newton-Raphson: starting theta_1 values per line.
+      integer :: nr_starts = 6
+      !> Newton-Raphson: iterations per start.
+      integer :: nr_iterations = 30
+   end type contact_params_type
+
+   !> A relative pose: y_B = m y_A + t; world x = cw + rw y_A.
+   type :: pose_type
+      real(wp) :: m(3, 3) = 0.0_wp
+      real(wp) :: t(3) = 0.0_wp
+      real(wp) :: k = 1.0_wp
+      real(wp) :: rw(3, 3) = 0.0_wp
+      real(wp) :: cw(3) = 0.0_wp
+      real(wp) :: sb = 1.0_wp
+   end type pose_type
+
+   integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
+
+contains
+
+   !> True when the two posed bodies overlap (thread-safe, no allocation).
+   pure logical function bodies_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
+                                        params) result(hit)
+      !> First body.
+      type(contact_body_type), intent(in) :: body_a
+      !> Its centre (world, mm).
+      real(wp), intent(in) :: center_a(3)
+      !> Its rotation, body to world.
+      real(wp), intent(in) :: rot_a(3, 3)
+      !> Its scale (mm per shape unit).
+      real(wp), intent(in) :: scale_a
+      !> Second body.
+      type(contact_body_type), intent(in) :: body_b
+      !> Its centre.
+      real(wp), intent(in) :: center_b(3)
+      !> Its rotation.
+      real(wp), intent(in) :: rot_b(3, 3)
+      !> Its scale.
+      real(wp), intent(in) :: scale_b
+      !> Parameters.
+      type(contact_params_type), intent(in) :: params
+      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3)
+      type(pose_type) :: pab, pba
+      logical :: found
+
+      dvec = center_b - center_a
+      dist = sqrt(sum(dvec**2))
+      ! stage 1: bounding and inscribed spheres
+      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max) then
+         hit = .false.
+         return
+      end if
+      if (dist < scale_a * body_a%r_min + scale_b * body_b%r_min) then
+         hit = .true.
+         return
+      end if
+      if (params%method == contact_method%newton_raphson) then
+         hit = nr_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params)
+         return
+      end if
+      ! stage 2: line of centres
+      u = dvec / dist
+      ra = scale_a * body_a%shape%radius_dir(matmul(u, rot_a))
+      rb = scale_b * body_b%shape%radius_dir(-matmul(u, rot_b))
+      if (ra + rb > dist) then
+         hit = .true.
+         return
+      end if
+      ! stage 3: extent boxes and the EOB
+      call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params%certified, &
+                   eob_lo, eob_hi)
+      if (any(eob_lo > eob_hi)) then
+         hit = .false.
+         return
+      end if
+      ! stage 4: surface of A against B, then surface of B against A
+      pab = make_pose(center_a, rot_a, scale_a, center_b, rot_b, scale_b)
+      pba = make_pose(center_b, rot_b, scale_b, center_a, rot_a, scale_a)
+      hit = .true.
+      call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, params, found)
+      if (found) return
+      call probe_surface(body_b, body_a, pba, eob_lo, eob_hi, params, found)
+      if (found) return
+      hit = .false.
+   end function bodies_overlap
+
+   !> Thesis D_overlap (mm): the largest radial penetration, along rays to the other body's
+   !> centre, of the surface points of either body on the N_box scan grid (theta_i =
+   !> (i - 1/2) pi/N_box, phi_j = (j - 1/2) pi/N_box) that lie in the EOB, plus the two surface
+   !> points on the line of centres; 0 when none penetrates. Patches certainly outside the other
+   !> body are skipped (they contribute 0).
+   pure function overlap_depth(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, nbox) &
+      result(depth)
+      !> First body.
+      type(contact_body_type), intent(in) :: body_a
+      !> Its centre (world, mm).
+      real(wp), intent(in) :: center_a(3)
+      !> Its rotation, body to world.
+      real(wp), intent(in) :: rot_a(3, 3)
+      !> Its scale (mm per shape unit).
+      real(wp), intent(in) :: scale_a
+      !> Second body.
+      type(contact_body_type), intent(in) :: body_b
+      !> Its centre.
+      real(wp), intent(in) :: center_b(3)
+      !> Its rotation.
+      real(wp), intent(in) :: rot_b(3, 3)
+      !> Its scale.
+      real(wp), intent(in) :: scale_b
+      !> Scan resolution N_box.
+      integer, intent(in) :: nbox
+      real(wp) :: depth
+      real(wp) :: dvec(3), dist, eob_lo(3), eob_hi(3), u(3)
+      type(pose_type) :: pab, pba
+      integer :: i, j
+
+      depth = 0.0_wp
+      dvec = center_b - center_a
+      dist = sqrt(sum(dvec**2))
+      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max) return
+      call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, .true., eob_lo, eob_hi)
+      if (any(eob_lo > eob_hi)) return
+      pab = make_pose(center_a, rot_a, scale_a, center_b, rot_b, scale_b)
+      pba = make_pose(center_b, rot_b, scale_b, center_a, rot_a, scale_a)
+      if (dist > 0.0_wp) then
+         u = dvec / dist
+         depth = max(depth, point_depth(body_a, body_b, pab, matmul(u, rot_a)))
+         depth = max(depth, point_depth(body_b, body_a, pba, -matmul(u, rot_b)))
+      end if
+      do j = 1, patch_cols(0)
+         do i = 1, patch_rows(0)
+            call depth_patch(body_a, body_b, pab, eob_lo, eob_hi, max(1, nbox), 0, i, j, depth)
+            call depth_patch(body_b, body_a, pba, eob_lo, eob_hi, max(1, nbox), 0, i, j, depth)
+         end do
+      end do
+   end function overlap_depth
+
+   !> True if any part of the posed body touches or leaves the box [0, L]^3. "False" is
+   !> guaranteed by the certified patch bounds: leaf patches still undecided are reported as
+   !> touching (a possible false positive within the leaf bound width of the wall).
+   pure logical function body_crosses_walls(body, center, rot, scale, box_length) result(out)
+      !> Body.
+      type(contact_body_type), intent(in) :: body
+      !> Centre (world, mm).
+      real(wp), intent(in) :: center(3)
+      !> Rotation, body to world.
+      real(wp), intent(in) :: rot(3, 3)
+      !> Scale (mm per shape unit).
+      real(wp), intent(in) :: scale
+      !> Box edge lengths (mm).
+      real(wp), intent(in) :: box_length(3)
+      integer :: k, sgn, i, j, code
+      real(wp) :: e(3), thr
+
+      if (all(center - scale * body%r_max > 0.0_wp) .and. all(center + scale * body%r_max < box_length)) then
+         out = .false.
+         return
+      end if
+      out = .true.
+      if (any(center - scale * body%r_min <= 0.0_wp) .or. any(center + scale * body%r_min >= box_length)) return
+      do k = 1, 3
+         do sgn = -1, 1, 2
+            ! body-frame direction of the outward wall normal and the support threshold
+            e = real(sgn, wp) * rot(k, :)
+            if (sgn > 0) then
+               thr = (box_length(k) - center(k)) / scale
+            else
+               thr = center(k) / scale
+            end if
+            if (body%r_max < thr) cycle
+            code = code_none
+            do j = 1, patch_cols(0)
+               do i = 1, patch_rows(0)
+                  call wall_patch(body, e, thr, 0, i, j, body%r_min, body%r_max, code)
+                  if (code == code_inside) return
+               end do
+            end do
+         end do
+      end do
+      out = .false.
+   end function body_crosses_walls
+
+   !> True when the body-frame point p of body A (pose A->B) is inside body B.
+   pure logical function point_inside(body_b, pose_m, pose_t, p) result(inside)
+      !> Body B.
+      type(contact_body_type), intent(in) :: body_b
+      !> Linear part and offset of the A-body to B-body map.
+      real(wp), intent(in) :: pose_m(3, 3), pose_t(3)
+      !> Point in A's body frame.
+      real(wp), intent(in) :: p(3)
+      real(wp) :: y(3), d
+      y = matmul(pose_m, p) + pose_t
+      d = sqrt(sum(y**2))
+      if (d <= 0.0_wp) then
+         inside = .true.
+      else
+         inside = d < body_b%shape%radius_dir(y)
+      end if
+   end function point_inside
+
+   ! ---------------------------------------------------------------------------------------------
+
+   pure function make_pose(ca, ra, sa, cb, rb, sb) result(ps)
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      type(pose_type) :: ps
+      ps%m = (sa / sb) * matmul(transpose(rb), ra)
+      ps%t = matmul(ca - cb, rb) / sb
+      ps%k = sa / sb
+      ps%rw = sa * ra
+      ps%cw = ca
+      ps%sb = sb
+   end function make_pose
+
+   pure subroutine world_box(lo, hi, c, rot, s, wlo, whi)
+      real(wp), intent(in) :: lo(3), hi(3), c(3), rot(3, 3), s
+      real(wp), intent(out) :: wlo(3), whi(3)
+      real(wp) :: mid(3), half(3)
+      mid = c + s * matmul(rot, 0.5_wp * (lo + hi))
+      half = s * matmul(abs(rot), 0.5_wp * (hi - lo))
+      wlo = mid - half
+      whi = mid + half
+   end subroutine world_box
+
+   pure subroutine eob_box(a, ca, ra, sa, b, cb, rb, sb, certified, lo, hi)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      logical, intent(in) :: certified
+      real(wp), intent(out) :: lo(3), hi(3)
+      real(wp) :: alo(3), ahi(3), blo(3), bhi(3)
+      if (certified) then
+         call world_box(a%box_lo, a%box_hi, ca, ra, sa, alo, ahi)
+         call world_box(b%box_lo, b%box_hi, cb, rb, sb, blo, bhi)
+      else
+         call world_box(a%ext_lo, a%ext_hi, ca, ra, sa, alo, ahi)
+         call world_box(b%ext_lo, b%ext_hi, cb, rb, sb, blo, bhi)
+      end if
+      lo = max(alo, blo)
+      hi = min(ahi, bhi)
+   end subroutine eob_box
+
+   pure logical function ball_in_box(x, rad, lo, hi) result(yes)
+      real(wp), intent(in) :: x(3), rad, lo(3), hi(3)
+      real(wp) :: q(3)
+      q = max(lo - x, 0.0_wp, x - hi)
+      yes = sum(q**2) <= rad**2
+   end function ball_in_box
+
+   !> Rectangle of patch (l, i, j).
+   pure subroutine patch_rect(l, i, j, th0, th1, ph0, ph1)
+      integer, intent(in) :: l, i, j
+      real(wp), intent(out) :: th0, th1, ph0, ph1
+      th0 = pi * (i - 1) / patch_rows(l)
+      th1 = pi * i / patch_rows(l)
+      ph0 = two_pi * (j - 1) / patch_cols(l)
+      ph1 = two_pi * j / patch_cols(l)
+   end subroutine patch_rect
+
+   !> Cap, radial bounds and sector ball of patch (l, i, j): stored for l <= leaf_level, otherwise
+   !> from r at the cap centre and the Lipschitz bound, intersected with the parent's bounds.
+   pure subroutine patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
+      type(contact_body_type), intent(in) :: a
+      integer, intent(in) :: l, i, j
+      real(wp), intent(in) :: plo, phi
+      real(wp), intent(out) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0
+      real(wp) :: th0, th1, ph0, ph1, alpha
+      integer :: k
+      if (l <= leaf_level) then
+         k = patch_index(a, l, i, j)
+         dir = a%dir(:, k)
+         cosa = a%cosa(k)
+         sina = a%sina(k)
+         rlo = a%rlo(k)
+         rhi = a%rhi(k)
+         cen = a%ball(:, k)
+         rad = a%brad(k)
+         r0 = -1.0_wp
+      else
+         call patch_rect(l, i, j, th0, th1, ph0, ph1)
+         call patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
+         alpha = atan2(sina, cosa)
+         r0 = a%shape%radius_dir(dir)
+         rlo = max(plo, r0 - a%lipschitz * alpha)
+         rhi = min(phi, r0 + a%lipschitz * alpha)
+         call sector_ball(dir, cosa, sina, rlo, rhi, cen, rad)
+      end if
+   end subroutine patch_data
+
+   !> Classify the ball (centre y in B's frame, radius rho) against B: outside, inside or mixed.
+   pure function classify_ball(b, y, rho) result(code)
+      type(contact_body_type), intent(in) :: b
+      real(wp), intent(in) :: y(3), rho
+      integer :: code
+      real(wp) :: d, lo, hi, u(3), sinb, cosb, beta, r0
+      integer :: i, j
+      d = sqrt(sum(y**2))
+      lo = d - rho
+      hi = d + rho
+      if (lo > b%r_max) then
+         code = code_outside
+         return
+      end if
+      if (d <= rho) then
+         code = code_mixed
+         return
+      end if
+      u = y / d
+      sinb = rho / d
+      cosb = sqrt(max(0.0_wp, 1.0_wp - sinb**2))
+      beta = asin(min(1.0_wp, sinb))
+      if (beta < 0.05_wp) then
+         r0 = b%shape%radius_dir(u)
+         if (r0 + b%lipschitz * beta < lo) then
+            code = code_outside
+            return
+         else if (r0 - b%lipschitz * beta > hi) then
+            code = code_inside
+            return
+         end if
+      end if
+      code = code_none
+      do j = 1, patch_cols(0)
+         do i = 1, patch_rows(0)
+            call classify_patch(b, 0, i, j, u, cosb, sinb, lo, hi, code)
+            if (code == code_mixed) return
+         end do
+      end do
+      if (code == code_none) code = code_mixed
+   end function classify_ball
+
+   pure recursive subroutine classify_patch(b, l, i, j, u, cosb, sinb, lo, hi, code)
+      type(contact_body_type), intent(in) :: b
+      integer, intent(in) :: l, i, j
+      real(wp), intent(in) :: u(3), cosb, sinb, lo, hi
+      integer, intent(inout) :: code
+      integer :: k, c, di, dj
+      k = patch_index(b, l, i, j)
+      ! cap intersection: angle(dir, u) <= alpha + beta
+      ! (alpha < pi/2 for every patch and beta < pi/2, so alpha + beta < pi)
+      if (dot_product(b%dir(:, k), u) < b%cosa(k) * cosb - b%sina(k) * sinb) return
+      if (b%rhi(k) < lo) then
+         c = code_outside
+      else if (b%rlo(k) > hi) then
+         c = code_inside
+      else if (l == leaf_level) then
+         c = code_mixed
+      else
+         do dj = 0, 1
+            do di = 0, 1
+               call classify_patch(b, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, u, cosb, sinb, lo, hi, code)
+               if (code == code_mixed) return
+            end do
+         end do
+         return
+      end if
+      if (code == code_none) then
+         code = c
+      else if (code /= c) then
+         code = code_mixed
+      end if
+   end subroutine classify_patch
+
+   pure subroutine probe_surface(a, b, ps, eob_lo, eob_hi, params, found)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3)
+      type(contact_params_type), intent(in) :: params
+      logical, intent(out) :: found
+      integer :: i, j, stop_level
+      stop_level = leaf_level
+      if (params%certified) then
+         do while (pi / patch_rows(stop_level) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. stop_level < 24)
+            stop_level = stop_level + 1
+         end do
+      end if
+      found = .false.
+      do j = 1, patch_cols(0)
+         do i = 1, patch_rows(0)
+            call probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, 0, i, j, a%r_min, a%r_max, found)
+            if (found) return
+         end do
+      end do
+   end subroutine probe_surface
+
+   pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, l, i, j, plo, phi, found)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3)
+      type(contact_params_type), intent(in) :: params
+      integer, intent(in) :: stop_level, l, i, j
+      real(wp), intent(in) :: plo, phi
+      logical, intent(inout) :: found
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, th0, th1, ph0, ph1
+      integer :: code, di, dj
+
+      call patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
+      if (r0 > 0.0_wp) then
+         ! on-the-fly patch: its centre surface point is a scan point
+         if (point_inside(b, ps%m, ps%t, r0 * dir)) then
+            found = .true.
+            return
+         end if
+      end if
+      if (.not. ball_in_box(ps%cw + matmul(ps%rw, cen), rad * sqrt(sum(ps%rw(:, 1)**2)), eob_lo, eob_hi)) return
+      code = classify_ball(b, matmul(ps%m, cen) + ps%t, ps%k * rad)
+      if (code == code_outside) return
+      if (code == code_inside) then
+         found = .true.
+         return
+      end if
+      if (l >= stop_level) then
+         ! undecided at the finest level: scan at N_box; certified mode then reports contact
+         call patch_rect(l, i, j, th0, th1, ph0, ph1)
+         call scan_rect(a, b, ps, eob_lo, eob_hi, params%nbox, th0, th1, ph0, ph1, found)
+         if (params%certified) found = .true.
+         return
+      end if
+      do dj = 0, 1
+         do di = 0, 1
+            call probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, &
+                             rlo, rhi, found)
+            if (found) return
+         end do
+      end do
+   end subroutine probe_patch
+
+   !> Index range of the N_box scan angles (k - 1/2) pi/nbox inside [x0, x1).
+   pure subroutine grid_range(x0, x1, nbox, k0, k1)
+      real(wp), intent(in) :: x0, x1
+      integer, intent(in) :: nbox
+      integer, intent(out) :: k0, k1
+      k0 = ceiling(x0 * nbox / pi + 0.5_wp)
+      k1 = ceiling(x1 * nbox / pi + 0.5_wp) - 1
+   end subroutine grid_range
+
+   pure subroutine scan_rect(a, b, ps, eob_lo, eob_hi, nbox, th0, th1, ph0, ph1, found)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3), th0, th1, ph0, ph1
+      integer, intent(in) :: nbox
+      logical, intent(inout) :: found
+      integer :: i0, i1, j0, j1, i, j
+      real(wp) :: th, ph, u(3), p(3), x(3)
+      call grid_range(th0, th1, nbox, i0, i1)
+      call grid_range(ph0, ph1, nbox, j0, j1)
+      do j = j0, j1
+         ph = pi * (j - 0.5_wp) / nbox
+         do i = i0, i1
+            th = pi * (i - 0.5_wp) / nbox
+            u = [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)]
+            p = a%shape%radius_dir(u) * u
+            x = ps%cw + matmul(ps%rw, p)
+            if (any(x < eob_lo) .or. any(x > eob_hi)) cycle
+            if (point_inside(b, ps%m, ps%t, p)) then
+               found = .true.
+               return
+            end if
+         end do
+      end do
+   end subroutine scan_rect
+
+   !> Radial penetration (mm) of A's surface point in direction u (A body frame) into B.
+   pure function point_depth(a, b, ps, u) result(depth)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: u(3)
+      real(wp) :: depth
+      real(wp) :: p(3), y(3), d
+      p = a%shape%radius_dir(u) * u / sqrt(sum(u**2))
+      y = matmul(ps%m, p) + ps%t
+      d = sqrt(sum(y**2))
+      if (d <= 0.0_wp) then
+         depth = b%r_min * ps%sb
+      else
+         depth = max(0.0_wp, (b%shape%radius_dir(y) - d) * ps%sb)
+      end if
+   end function point_depth
+
+   pure recursive subroutine depth_patch(a, b, ps, eob_lo, eob_hi, nbox, l, i, j, depth)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3)
+      integer, intent(in) :: nbox, l, i, j
+      real(wp), intent(inout) :: depth
+      integer :: k, di, dj, i0, i1, j0, j1, ii, jj
+      real(wp) :: th0, th1, ph0, ph1, th, ph, u(3), x(3)
+      k = patch_index(a, l, i, j)
+      if (.not. ball_in_box(ps%cw + matmul(ps%rw, a%ball(:, k)), a%brad(k) * sqrt(sum(ps%rw(:, 1)**2)), &
+                            eob_lo, eob_hi)) return
+      if (classify_ball(b, matmul(ps%m, a%ball(:, k)) + ps%t, ps%k * a%brad(k)) == code_outside) return
+      if (l < leaf_level) then
+         do dj = 0, 1
+            do di = 0, 1
+               call depth_patch(a, b, ps, eob_lo, eob_hi, nbox, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, depth)
+            end do
+         end do
+         return
+      end if
+      call patch_rect(l, i, j, th0, th1, ph0, ph1)
+      call grid_range(th0, th1, nbox, i0, i1)
+      call grid_range(ph0, ph1, nbox, j0, j1)
+      do jj = j0, j1
+         ph = pi * (jj - 0.5_wp) / nbox
+         do ii = i0, i1
+            th = pi * (ii - 0.5_wp) / nbox
+            u = [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)]
+            x = ps%cw + matmul(ps%rw, a%shape%radius_dir(u) * u)
+            if (any(x < eob_lo) .or. any(x > eob_hi)) cycle
+            depth = max(depth, point_depth(a, b, ps, u))
+         end do
+      end do
+   end subroutine depth_patch
+
+   !> Support test against a wall: code_inside when some body point has y.e >= thr.
+   pure recursive subroutine wall_patch(a, e, thr, l, i, j, plo, phi, code)
+      type(contact_body_type), intent(in) :: a
+      real(wp), intent(in) :: e(3), thr, plo, phi
+      integer, intent(in) :: l, i, j
+      integer, intent(inout) :: code
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, ang, mu, ub
+      integer :: di, dj
+      call patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
+      if (r0 > 0.0_wp) then
+         if (r0 * dot_product(dir, e) >= thr) then
+            code = code_inside
+            return
+         end if
+      end if
+      if (rlo * dot_product(dir, e) >= thr) then
+         code = code_inside
+         return
+      end if
+      ang = acos(max(-1.0_wp, min(1.0_wp, dot_product(dir, e)))) - atan2(sina, cosa)
+      mu = cos(max(0.0_wp, ang))
+      if (mu >= 0.0_wp) then
+         ub = rhi * mu
+      else
+         ub = max(0.0_wp, rlo) * mu
+      end if
+      ub = min(ub, dot_product(cen, e) + rad)
+      if (ub < thr) return
+      if (l >= leaf_level) then
+         code = code_inside
+         return
+      end if
+      do dj = 0, 1
+         do di = 0, 1
+            call wall_patch(a, e, thr, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, rlo, rhi, code)
+            if (code == code_inside) return
+         end do
+      end do
+   end subroutine wall_patch
+
+   !> Legacy Newton-Raphson contact (Eq 1.5 with theta_2, phi_2 eliminated along the ray to B's centre).
+   pure logical function nr_overlap(a, ca, ra, sa, b, cb, rb, sb, params) result(hit)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      type(contact_params_type), intent(in) :: params
+      type(pose_type) :: pab, pba
+      integer :: il, is, it
+      real(wp) :: ph, th, g, gp, gm, step, tol
+      real(wp), parameter :: h = 1.0e-7_wp
+
+      pab = make_pose(ca, ra, sa, cb, rb, sb)
+      pba = make_pose(cb, rb, sb, ca, ra, sa)
+      hit = .true.
+      if (point_inside(b, pab%m, pab%t, [0.0_wp, 0.0_wp, 0.0_wp])) return
+      if (point_inside(a, pba%m, pba%t, [0.0_wp, 0.0_wp, 0.0_wp])) return
+      tol = 1.0e-10_wp * b%r_max
+      do il = 0, params%nr_lines - 1
+         ph = two_pi * il / max(1, params%nr_lines)
+         do is = 1, params%nr_starts
+            th = pi * (is - 0.5_wp) / params%nr_starts
+            do it = 1, params%nr_iterations
+               g = gap(th)
+               if (abs(g) <= tol) return
+               gp = gap(th + h)
+               gm = gap(th - h)
+               if (gp == gm) exit
+               step = g * 2.0_wp * h / (gp - gm)
+               th = th - step
+               if (th < -0.1_wp .or. th > pi + 0.1_wp) exit
+            end do
+         end do
+      end do
+      hit = .false.
+   contains
+      pure function gap(t) result(gv)
+         real(wp), intent(in) :: t
+         real(wp) :: gv
+         real(wp) :: u(3), y(3), d
+         u = [sin(t) * cos(ph), sin(t) * sin(ph), cos(t)]
+         y = matmul(pab%m, a%shape%radius_dir(u) * u) + pab%t
+         d = sqrt(sum(y**2))
+         gv = d - b%shape%radius_dir(y)
+      end function gap
+   end function nr_overlap
+end module anm_contact_overlap

@@ -1,0 +1,442 @@
+!> The parking engine (thesis section 2.1, Fig 1.3): particles are parked one at a time, largest
+!> sieve first, at random locations without overlap, until each sieve's target volume is reached
+!> or its attempts are exhausted.
+!>
+!> For each particle: up to max_shapes shapes of the sieve, for each up to max_sizes widths
+!> (uniform in the sieve's range), for each up to max_orientations uniformly random rotations, for
+!> each up to max_locations uniformly random centres (the thesis' four randomness sources). A
+!> particle that exhausts them ends its sieve (reported as a shortfall, never an endless loop).
+!> The last particle of a sieve is kept only if it brings the sieve's volume closer to its target.
+!>
+!> Particle i of sieve s draws every random number from its own stream (seed, s 2^32 + i): the
+!> model depends only on the namelist and the seed.
+!>
+!> Per (sieve, shape) the engine precomputes the geometry at the sieve's order (width, length,
+!> volume), the contact body and, with shells, the outer surface of every layer. With thickness
+!> in mm, widths are drawn from `width_levels` equally spaced values per sieve so that shells can
+!> be precomputed per (sieve, shape, width level).
+!>
+!> Usage:
+!>     call run_parking(cfg, model, error, progress_unit=error_unit)
+module anm_parking_engine
+   use anm_core_kinds, only: wp, i8, pi
+   use anm_core_error, only: error_type, fatal_error, error_code
+   use anm_core_strings, only: to_string
+   use anm_core_random, only: rng_type, new_rng
+   use anm_sh_expansion, only: sh_expansion_type, sh_truncate
+   use anm_shapes_library, only: shape_set_type, load_shapes, synthetic_shapes
+   use anm_shapes_analytic, only: sphere_shape
+   use anm_geometry_properties, only: shape_geometry_type, compute_geometry
+   use anm_geometry_rotation, only: random_rotation
+   use anm_contact_body, only: contact_body_type, new_contact_body
+   use anm_contact_overlap, only: contact_params_type, contact_method, bodies_overlap, body_crosses_walls
+   use anm_shells_build, only: shell_report_type, build_layers
+   use anm_parking_config, only: run_config_type, shell_mode, resolved_namelist
+   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_io_model, only: model_type
+   implicit none
+   private
+
+   public :: run_parking, particle_kind_type, width_levels
+
+   !> Discrete widths per sieve when shell thickness is given in mm.
+   integer, parameter :: width_levels = 8
+
+   !> Precomputed data of one (sieve, shape[, width level]) combination.
+   type :: particle_kind_type
+      !> Index into the model's shapes.
+      integer :: shape = 0
+      !> Sieve.
+      integer :: sieve = 0
+      !> Order used.
+      integer :: order = 0
+      !> Width level (0: continuous widths).
+      integer :: level = 0
+      !> Geometry at the order used (shape units).
+      real(wp) :: width = 0.0_wp, length = 0.0_wp, volume = 0.0_wp
+      !> Bare particle.
+      type(contact_body_type) :: body
+      !> Particle plus its outermost shell (allocated with shells).
+      type(contact_body_type), allocatable :: shell_body
+      !> Outer surfaces of the layers (shape units) and the volume inside each.
+      type(sh_expansion_type), allocatable :: layers(:)
+      !> Volume inside each layer's outer surface (shape units).
+      real(wp), allocatable :: layer_volume(:)
+      !> Bounding radius of the largest body used (shape units).
+      real(wp) :: r_out = 0.0_wp
+   end type particle_kind_type
+
+contains
+
+   !> Build the model the configuration asks for. Progress goes to `progress_unit` (stderr in the
+   !> program) about every two seconds.
+   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit)
+      !> Validated configuration.
+      type(run_config_type), intent(in) :: cfg
+      !> The packed model.
+      type(model_type), intent(out) :: model
+      !> Precomputed kinds (also used for VRML output).
+      type(particle_kind_type), allocatable, intent(out) :: kinds(:)
+      !> Kind of each particle.
+      integer, allocatable, intent(out) :: kind_of(:)
+      !> Error: a shape source cannot be read, a shell cannot be built.
+      type(error_type), allocatable, intent(out) :: error
+      !> Unit for progress lines (none when absent).
+      integer, intent(in), optional :: progress_unit
+      type(contact_params_type) :: params
+      type(cell_list_type) :: cl
+      type(rng_type) :: rng
+      integer, allocatable :: first_kind(:), nkind_sieve(:)
+      real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:), cand_shift(:, :)
+      integer, allocatable :: sieve_of(:), cand(:)
+      real(wp) :: vbox, vol, target, v, c(3), r(3, 3), sc, w, rho_min
+      integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
+      integer :: s, np, k, kk, is, iz, io, il, ilev, nstream, nlev
+      logical :: placed, keep
+
+      call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
+      if (allocated(error)) return
+      params%method = merge(contact_method%eob, contact_method%newton_raphson, cfg%contact_method == "eob")
+      params%next = cfg%n_ext
+      params%nbox = cfg%n_box
+      params%certified = cfg%certified
+
+      nlev = 1
+      if (cfg%nlayer > 0 .and. cfg%thickness_unit == "mm") nlev = width_levels
+      vbox = product(cfg%box)
+      rho_min = huge(1.0_wp)
+      do k = 1, size(kinds)
+         rho_min = min(rho_min, kinds(k)%body%r_min * cfg%min_width(kinds(k)%sieve) / kinds(k)%width)
+      end do
+      call new_cell_list(cl, cfg%box, cfg%periodic, rho_min, capacity=4096)
+      allocate (center(3, 4096), rot(3, 3, 4096), scale(4096), rho(4096), sieve_of(4096), kind_of(4096))
+      np = 0
+      attempts = 0
+      allocate (model%achieved_fraction(cfg%nsieve), model%count(cfg%nsieve), model%shell_fraction(cfg%nsieve))
+      model%achieved_fraction = 0.0_wp
+      model%count = 0
+      model%shell_fraction = 0.0_wp
+      call system_clock(t0, rate)
+      tlast = t0
+
+      do s = 1, cfg%nsieve
+         target = cfg%target_fraction(s) * vbox
+         vol = 0.0_wp
+         attempts_sieve = 0
+         nstream = 0
+         do while (vol < target)
+            nstream = nstream + 1
+            call new_rng(rng, cfg%seed, int(s, i8) * 4294967296_i8 + nstream)
+            placed = .false.
+            shapes: do is = 1, cfg%max_shapes
+               ! kinds of a sieve: nlev blocks (width levels) of its shapes
+               kk = first_kind(s) + rng%below(nkind_sieve(s) / nlev) - 1
+               do iz = 1, cfg%max_sizes
+                  if (nlev > 1) then
+                     ilev = rng%below(width_levels)
+                     k = kk + (ilev - 1) * (nkind_sieve(s) / nlev)
+                     w = cfg%min_width(s) + (ilev - 0.5_wp) * (cfg%max_width(s) - cfg%min_width(s)) / width_levels
+                  else
+                     k = kk
+                     w = rng%uniform_range(cfg%min_width(s), cfg%max_width(s))
+                  end if
+                  sc = w / kinds(k)%width
+                  do io = 1, cfg%max_orientations
+                     r = random_rotation(rng)
+                     do il = 1, cfg%max_locations
+                        c = random_centre(rng, sc * kinds(k)%body%r_min)
+                        attempts = attempts + 1
+                        attempts_sieve = attempts_sieve + 1
+                        if (fits(k, c, r, sc)) then
+                           placed = .true.
+                           exit shapes
+                        end if
+                     end do
+                  end do
+               end do
+            end do shapes
+            if (.not. placed) exit
+            v = sc**3 * kinds(k)%volume
+            keep = vol + v <= target .or. (vol + v - target) <= (target - vol)
+            if (.not. keep) exit
+            call add_particle(k, c, r, sc)
+            vol = vol + v
+            model%count(s) = model%count(s) + 1
+            if (cfg%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
+                                                         + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
+            call system_clock(t1)
+            if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
+               write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", s, ": placed ", model%count(s), &
+                  ", fraction ", vol / vbox, " of ", cfg%target_fraction(s), ", ", &
+                  real(attempts, wp) / max(1.0e-9_wp, real(t1 - t0, wp) / rate), " attempts/s"
+               tlast = t1
+            end if
+         end do
+         model%achieved_fraction(s) = vol / vbox
+         if (present(progress_unit)) then
+            call system_clock(t1)
+            write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,f7.1,a)') "sieve ", s, " done: ", model%count(s), &
+               " particles, fraction ", vol / vbox, " (target ", cfg%target_fraction(s), "), ", attempts_sieve, &
+               " attempts, ", real(t1 - t0, wp) / rate, " s"
+            if (cfg%target_fraction(s) - vol / vbox > 0.01_wp * cfg%target_fraction(s)) then
+               write (progress_unit, '(a,i0,a,f8.5,a)') "warning: sieve ", s, " ended ", &
+                  cfg%target_fraction(s) - vol / vbox, " short of its target (attempts exhausted)"
+            end if
+         end if
+      end do
+      call system_clock(t1)
+
+      model%box = cfg%box
+      model%periodic = cfg%periodic
+      model%np = np
+      model%center = center(:, :np)
+      model%rotation = rot(:, :, :np)
+      model%scale = scale(:np)
+      model%sieve = sieve_of(:np)
+      kind_of = kind_of(:np)
+      allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%nlayer, np))
+      do k = 1, np
+         model%shape(k) = kinds(kind_of(k))%shape
+         model%nmax(k) = kinds(kind_of(k))%order
+         if (cfg%nlayer > 0) then
+            if (cfg%thickness_unit == "mm") then
+               model%shell_thickness(:, k) = cfg%thickness
+            else
+               model%shell_thickness(:, k) = cfg%thickness * kinds(kind_of(k))%length * scale(k)
+            end if
+         end if
+      end do
+      model%min_width = cfg%min_width
+      model%max_width = cfg%max_width
+      model%target_fraction = cfg%target_fraction
+      model%namelist = cfg%text
+      model%resolved = resolved_namelist(cfg)
+      model%seed = cfg%seed
+      model%attempts = attempts
+      model%wall_time = real(t1 - t0, wp) / rate
+   contains
+
+      function random_centre(gen, margin) result(x)
+         type(rng_type), intent(inout) :: gen
+         real(wp), intent(in) :: margin
+         real(wp) :: x(3)
+         integer :: d
+         do d = 1, 3
+            if (cfg%periodic) then
+               x(d) = gen%uniform() * cfg%box(d)
+            else
+               x(d) = gen%uniform_range(margin, cfg%box(d) - margin)
+            end if
+         end do
+      end function random_centre
+
+      !> No overlap with the walls (non-periodic) or any parked particle, as the shell mode says.
+      logical function fits(kn, x, rr, s_) result(ok)
+         integer, intent(in) :: kn
+         real(wp), intent(in) :: x(3), rr(3, 3), s_
+         integer :: i, j, ncand
+         real(wp) :: xj(3)
+         ok = .false.
+         if (.not. cfg%periodic) then
+            if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
+               if (body_crosses_walls(kinds(kn)%shell_body, x, rr, s_, cfg%box)) return
+            else
+               if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box)) return
+            end if
+         end if
+         call cl%query(x, s_ * kinds(kn)%r_out, center, rho, cand, cand_shift, ncand)
+         do i = 1, ncand
+            j = cand(i)
+            xj = center(:, j) + cand_shift(:, i)
+            associate (kj => kinds(kind_of(j)))
+               if (cfg%nlayer == 0 .or. cfg%mode == shell_mode%overlap) then
+                  if (bodies_overlap(kinds(kn)%body, x, rr, s_, kj%body, xj, rot(:, :, j), scale(j), params)) return
+               else if (cfg%mode == shell_mode%exclude) then
+                  if (bodies_overlap(kinds(kn)%shell_body, x, rr, s_, kj%shell_body, xj, rot(:, :, j), scale(j), &
+                                     params)) return
+               else
+                  if (bodies_overlap(kinds(kn)%shell_body, x, rr, s_, kj%body, xj, rot(:, :, j), scale(j), params)) return
+                  if (bodies_overlap(kinds(kn)%body, x, rr, s_, kj%shell_body, xj, rot(:, :, j), scale(j), params)) return
+               end if
+            end associate
+         end do
+         ok = .true.
+      end function fits
+
+      subroutine add_particle(kn, x, rr, s_)
+         integer, intent(in) :: kn
+         real(wp), intent(in) :: x(3), rr(3, 3), s_
+         if (np == size(scale)) call grow()
+         np = np + 1
+         center(:, np) = x
+         rot(:, :, np) = rr
+         scale(np) = s_
+         rho(np) = s_ * kinds(kn)%r_out
+         sieve_of(np) = s
+         kind_of(np) = kn
+         call cl%insert(np, x, rho(np))
+      end subroutine add_particle
+
+      subroutine grow()
+         real(wp), allocatable :: c2(:, :), r2(:, :, :), s2(:), h2(:)
+         integer, allocatable :: i2(:), k2(:)
+         integer :: n
+         n = 2 * size(scale)
+         allocate (c2(3, n), r2(3, 3, n), s2(n), h2(n), i2(n), k2(n))
+         c2(:, :np) = center(:, :np)
+         r2(:, :, :np) = rot(:, :, :np)
+         s2(:np) = scale(:np)
+         h2(:np) = rho(:np)
+         i2(:np) = sieve_of(:np)
+         k2(:np) = kind_of(:np)
+         call move_alloc(c2, center)
+         call move_alloc(r2, rot)
+         call move_alloc(s2, scale)
+         call move_alloc(h2, rho)
+         call move_alloc(i2, sieve_of)
+         call move_alloc(k2, kind_of)
+      end subroutine grow
+   end subroutine run_parking
+
+   !> Load the shapes of every sieve (each distinct source once) and precompute every kind.
+   subroutine prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
+      type(run_config_type), intent(in) :: cfg
+      type(model_type), intent(inout) :: model
+      type(particle_kind_type), allocatable, intent(out) :: kinds(:)
+      integer, allocatable, intent(out) :: first_kind(:), nkind_sieve(:)
+      type(error_type), allocatable, intent(out) :: error
+      type(shape_set_type), allocatable :: sets(:)
+      integer, allocatable :: set_of(:), set_first(:)
+      character(len=512), allocatable :: src(:)
+      integer :: s, nset, k, i, ns, nlev, lev, total, n
+      type(error_type), allocatable :: errs(:)
+      logical, allocatable :: failed(:)
+
+      allocate (set_of(cfg%nsieve), src(cfg%nsieve))
+      nset = 0
+      do s = 1, cfg%nsieve
+         set_of(s) = 0
+         do i = 1, nset
+            if (src(i) == cfg%source(s)) set_of(s) = i
+         end do
+         if (set_of(s) == 0) then
+            nset = nset + 1
+            src(nset) = cfg%source(s)
+            set_of(s) = nset
+         end if
+      end do
+      allocate (sets(nset), set_first(nset))
+      total = 0
+      do i = 1, nset
+         if (trim(src(i)) == "synthetic") then
+            call synthetic_shapes(cfg%synthetic, cfg%seed, cfg%synthetic_count, sets(i), error)
+         else if (trim(src(i)) == "sphere") then
+            allocate (sets(i)%names(1), sets(i)%shapes(1))
+            sets(i)%names(1)%s = "sphere"
+            sets(i)%shapes(1) = sphere_shape(1.0_wp)
+         else
+            call load_shapes(trim(src(i)), sets(i), error)
+         end if
+         if (allocated(error)) then
+            error%message = cfg%file//": &sieves: source = '"//trim(src(i))//"': "//error%message
+            return
+         end if
+         set_first(i) = total
+         total = total + size(sets(i)%shapes)
+      end do
+      allocate (model%shapes(total), model%shape_names(total))
+      do i = 1, nset
+         do k = 1, size(sets(i)%shapes)
+            model%shapes(set_first(i) + k) = sets(i)%shapes(k)
+            model%shape_names(set_first(i) + k) = sets(i)%names(k)%s
+         end do
+      end do
+
+      nlev = 1
+      if (cfg%nlayer > 0 .and. cfg%thickness_unit == "mm") nlev = width_levels
+      allocate (first_kind(cfg%nsieve), nkind_sieve(cfg%nsieve))
+      n = 0
+      do s = 1, cfg%nsieve
+         first_kind(s) = n + 1
+         nkind_sieve(s) = size(sets(set_of(s))%shapes) * nlev
+         n = n + nkind_sieve(s)
+      end do
+      allocate (kinds(n), errs(n), failed(n))
+      do s = 1, cfg%nsieve
+         ns = size(sets(set_of(s))%shapes)
+         do lev = 1, nlev
+            do k = 1, ns
+               i = first_kind(s) + (lev - 1) * ns + k - 1
+               kinds(i)%shape = set_first(set_of(s)) + k
+               kinds(i)%sieve = s
+               kinds(i)%level = merge(lev, 0, nlev > 1)
+               kinds(i)%order = model%shapes(kinds(i)%shape)%nmax
+               if (cfg%order(s) >= 0) kinds(i)%order = min(cfg%order(s), kinds(i)%order)
+            end do
+         end do
+      end do
+      failed = .false.
+      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n) private(i) schedule(dynamic)
+      do i = 1, n
+         block
+            type(error_type), allocatable :: err
+            call prepare_one(cfg, model%shapes(kinds(i)%shape), trim(model%shape_names(kinds(i)%shape)), kinds(i), err)
+            if (allocated(err)) then
+               failed(i) = .true.
+               errs(i) = err
+            end if
+         end block
+      end do
+      !$omp end parallel do
+      do i = 1, n
+         if (failed(i)) then
+            call fatal_error(error, errs(i)%message, errs(i)%stat)
+            return
+         end if
+      end do
+   end subroutine prepare_kinds
+
+   subroutine prepare_one(cfg, shape, name, kd, error)
+      type(run_config_type), intent(in) :: cfg
+      type(sh_expansion_type), intent(in) :: shape
+      character(len=*), intent(in) :: name
+      type(particle_kind_type), intent(inout) :: kd
+      type(error_type), allocatable, intent(out) :: error
+      type(shape_geometry_type) :: g
+      type(sh_expansion_type) :: s
+      type(shell_report_type), allocatable :: reports(:)
+      real(wp), allocatable :: t(:)
+      real(wp) :: w, sc
+      integer :: k
+      s = sh_truncate(shape, kd%order)
+      call compute_geometry(s, g)
+      kd%width = g%width
+      kd%length = g%length
+      kd%volume = g%volume
+      call new_contact_body(kd%body, s, error, next=cfg%n_ext)
+      if (allocated(error)) return
+      kd%r_out = kd%body%r_max
+      if (cfg%nlayer == 0) return
+      if (cfg%thickness_unit == "mm") then
+         w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
+             / width_levels
+         sc = w / kd%width
+         t = cfg%thickness / sc
+      else
+         t = cfg%thickness * kd%length
+      end if
+      call build_layers(s, t, kd%layers, reports, error, label=name)
+      if (allocated(error)) then
+         error%message = cfg%file//": &shells: "//error%message
+         return
+      end if
+      allocate (kd%layer_volume(size(t)))
+      do k = 1, size(t)
+         kd%layer_volume(k) = reports(k)%outer_volume
+      end do
+      allocate (kd%shell_body)
+      call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=cfg%n_ext)
+      if (allocated(error)) return
+      kd%r_out = max(kd%r_out, kd%shell_body%r_max)
+   end subroutine prepare_one
+end module anm_parking_engine

@@ -1,0 +1,501 @@
+!> Tests of particle contact against outside truth: spheres (exact, to 1e-9 of tangency),
+!> ellipsoids against the Perram-Wertheim contact function implemented here, real NIST shapes
+!> against a dense brute-force reference, walls against exact ellipsoid extents, the Newton-Raphson
+!> baseline, and the certified bounds of the patch hierarchy against dense sampling.
+module test_contact
+   use, intrinsic :: iso_fortran_env, only: output_unit
+   use anm_core_kinds, only: wp, pi, two_pi, i8
+   use anm_core_error, only: error_type, fatal_error
+   use anm_core_random, only: rng_type, new_rng
+   use anm_core_strings, only: to_string
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_shapes_library, only: load_shape_file
+   use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape, ellipsoid_radius
+   use anm_geometry_rotation, only: random_rotation, world_to_body, body_to_world
+   use anm_contact_body, only: contact_body_type, new_contact_body, leaf_level, patch_rows, patch_cols, &
+      & patch_index
+   use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_depth, &
+      & body_crosses_walls
+   use anm_testing, only: unittest_type, new_unittest, check, shapes_dir
+   implicit none
+   private
+   public :: collect_contact
+
+   !> Ellipsoid expansion order and the relative band |d/d* - 1| excluded around tangency.
+   integer, parameter :: ell_order = 24
+   real(wp), parameter :: ell_band = 0.01_wp
+
+   !> Dense surface points of one shape (3, npoint).
+   type :: real_pts_type
+      real(wp), allocatable :: p(:, :)
+   end type real_pts_type
+
+contains
+
+   !> Tests of this suite.
+   subroutine collect_contact(tests)
+      type(unittest_type), allocatable, intent(out) :: tests(:)
+      tests = [ &
+              new_unittest("patch bounds contain densely sampled r", test_patch_bounds), &
+              new_unittest("spheres: exact decision to 1e-9 of tangency", test_spheres), &
+              new_unittest("ellipsoids agree with Perram-Wertheim", test_ellipsoids), &
+              new_unittest("real shapes against dense brute force", test_real_shapes), &
+              new_unittest("walls against exact ellipsoid extents", test_walls), &
+              new_unittest("Newton-Raphson baseline on spheres and ellipsoids", test_newton_raphson)]
+   end subroutine collect_contact
+
+   subroutine test_patch_bounds(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=:), allocatable :: dir
+      type(sh_expansion_type) :: shape
+      type(contact_body_type) :: body
+      type(rng_type) :: rng
+      integer :: n, k, i, j, l, ip
+      real(wp) :: th, ph, r, u(3)
+      call shapes_dir(dir, error)
+      if (allocated(error)) return
+      call load_shape_file(dir//"/MA111-7-coarse/MA111-7-coarse-anm-00009.dat", shape, error)
+      if (allocated(error)) return
+      call new_contact_body(body, shape, error, nused=14)
+      if (allocated(error)) return
+      call new_rng(rng, 7_i8, 1_i8)
+      ! random points: each must be within the bounds of its patch at every stored level
+      do n = 1, 200000
+         th = acos(2.0_wp * rng%uniform() - 1.0_wp)
+         ph = two_pi * rng%uniform()
+         u = [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)]
+         r = body%shape%radius_dir(u)
+         do l = 0, leaf_level
+            i = min(patch_rows(l), int(th / pi * patch_rows(l)) + 1)
+            j = min(patch_cols(l), int(ph / two_pi * patch_cols(l)) + 1)
+            k = patch_index(body, l, i, j)
+            ip = k
+            if (r > body%rhi(ip) .or. r < body%rlo(ip)) then
+               call fatal_error(error, "r = "//to_string(r)//" outside patch bounds ["//to_string(body%rlo(ip)) &
+                                //", "//to_string(body%rhi(ip))//"] at level "//to_string(l))
+               return
+            end if
+            if (acos(min(1.0_wp, dot_product(u, body%dir(:, k)))) > atan2(body%sina(k), body%cosa(k))) then
+               call fatal_error(error, "direction outside its patch cap at level "//to_string(l))
+               return
+            end if
+         end do
+      end do
+      ! the box bound contains the N_ext scan box and the bounds are not absurdly loose
+      call check(error, all(body%box_hi >= body%ext_hi) .and. all(body%box_lo <= body%ext_lo), &
+                 "certified box must contain the N_ext scan box")
+      if (allocated(error)) return
+      write (output_unit, '(a,4f9.4)') "    r_min, r_max (certified), leaf mean width, Lipschitz/r_max: ", &
+         body%r_min, body%r_max, sum(body%rhi(body%off(leaf_level) + 1:) - body%rlo(body%off(leaf_level) + 1:)) &
+         / (body%off(leaf_level + 1) - body%off(leaf_level)), body%lipschitz / body%r_max
+      call check(error, body%r_max - body%r_min < 0.9_wp * body%r_max, "certified radial bounds too loose")
+   end subroutine test_patch_bounds
+
+   subroutine test_spheres(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(contact_body_type) :: ba, bb
+      type(contact_params_type) :: par, cert
+      type(rng_type) :: rng
+      real(wp) :: ra, rb, sa, sb, ca(3), cb(3), u(3), d, gap, rota(3, 3), rotb(3, 3)
+      integer :: n, nbad
+      logical :: expect
+      call new_contact_body(ba, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      call new_contact_body(bb, sphere_shape(0.7_wp), error)
+      if (allocated(error)) return
+      cert%certified = .true.
+      call new_rng(rng, 11_i8, 1_i8)
+      nbad = 0
+      do n = 1, 20000
+         sa = 0.5_wp + rng%uniform()
+         sb = 0.5_wp + 2.0_wp * rng%uniform()
+         ra = sa * 1.0_wp
+         rb = sb * 0.7_wp
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         select case (mod(n, 4))
+         case (0)
+            gap = 1.0e-9_wp
+         case (1)
+            gap = -1.0e-9_wp
+         case default
+            gap = (ra + rb) * (2.0_wp * rng%uniform() - 1.0_wp) * 10.0_wp**(-9.0_wp * rng%uniform())
+         end select
+         ca = [10.0_wp, 10.0_wp, 10.0_wp] + [rng%uniform(), rng%uniform(), rng%uniform()]
+         cb = ca + (ra + rb + gap) * u
+         d = norm2(cb - ca)
+         expect = d < ra + rb
+         if (bodies_overlap(ba, ca, rota, sa, bb, cb, rotb, sb, par) .neqv. expect) nbad = nbad + 1
+         if (bodies_overlap(ba, ca, rota, sa, bb, cb, rotb, sb, cert) .neqv. expect) nbad = nbad + 1
+      end do
+      call check(error, nbad, 0, "wrong sphere decisions")
+   end subroutine test_spheres
+
+   !> Perram-Wertheim: overlap iff max_lambda lambda (1-lambda) r^T [(1-lambda) A^-1 ... ] < 1, written
+   !> with A = R diag(a^2) R^T: F = max lambda(1-lambda) r^T ((1-lambda) A + lambda B)^-1 r.
+   function pw_function(rot_a, sa, rot_b, sb, r) result(f)
+      real(wp), intent(in) :: rot_a(3, 3), sa(3), rot_b(3, 3), sb(3), r(3)
+      real(wp) :: f
+      real(wp) :: ma(3, 3), mb(3, 3), x0, x1, x2, x3, f1, f2
+      integer :: it
+      real(wp), parameter :: gr = 0.6180339887498949_wp
+      ma = matmul(rot_a, matmul(diag(sa**2), transpose(rot_a)))
+      mb = matmul(rot_b, matmul(diag(sb**2), transpose(rot_b)))
+      x0 = 0.0_wp
+      x3 = 1.0_wp
+      x1 = x3 - gr * (x3 - x0)
+      x2 = x0 + gr * (x3 - x0)
+      f1 = pw_value(x1)
+      f2 = pw_value(x2)
+      do it = 1, 80
+         if (f1 < f2) then
+            x0 = x1
+            x1 = x2
+            f1 = f2
+            x2 = x0 + gr * (x3 - x0)
+            f2 = pw_value(x2)
+         else
+            x3 = x2
+            x2 = x1
+            f2 = f1
+            x1 = x3 - gr * (x3 - x0)
+            f1 = pw_value(x1)
+         end if
+      end do
+      f = max(f1, f2)
+   contains
+      function pw_value(lam) result(v)
+         real(wp), intent(in) :: lam
+         real(wp) :: v, c(3, 3)
+         c = (1.0_wp - lam) * ma + lam * mb
+         v = lam * (1.0_wp - lam) * dot_product(r, solve3(c, r))
+      end function pw_value
+   end function pw_function
+
+   pure function diag(v) result(m)
+      real(wp), intent(in) :: v(3)
+      real(wp) :: m(3, 3)
+      m = 0.0_wp
+      m(1, 1) = v(1)
+      m(2, 2) = v(2)
+      m(3, 3) = v(3)
+   end function diag
+
+   pure function solve3(a, b) result(x)
+      real(wp), intent(in) :: a(3, 3), b(3)
+      real(wp) :: x(3), det, inv(3, 3)
+      inv(1, 1) = a(2, 2) * a(3, 3) - a(2, 3) * a(3, 2)
+      inv(1, 2) = a(1, 3) * a(3, 2) - a(1, 2) * a(3, 3)
+      inv(1, 3) = a(1, 2) * a(2, 3) - a(1, 3) * a(2, 2)
+      inv(2, 1) = a(2, 3) * a(3, 1) - a(2, 1) * a(3, 3)
+      inv(2, 2) = a(1, 1) * a(3, 3) - a(1, 3) * a(3, 1)
+      inv(2, 3) = a(1, 3) * a(2, 1) - a(1, 1) * a(2, 3)
+      inv(3, 1) = a(2, 1) * a(3, 2) - a(2, 2) * a(3, 1)
+      inv(3, 2) = a(1, 2) * a(3, 1) - a(1, 1) * a(3, 2)
+      inv(3, 3) = a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)
+      det = a(1, 1) * inv(1, 1) + a(1, 2) * inv(2, 1) + a(1, 3) * inv(3, 1)
+      x = matmul(inv, b) / det
+   end function solve3
+
+   !> Largest |r_N - r_exact| of an expanded ellipsoid on a dense random sample.
+   function ellipsoid_error(shape, ax) result(err)
+      type(sh_expansion_type), intent(in) :: shape
+      real(wp), intent(in) :: ax(3)
+      real(wp) :: err, u(3)
+      type(rng_type) :: rng
+      integer :: n
+      call new_rng(rng, 3_i8, 9_i8)
+      err = 0.0_wp
+      do n = 1, 20000
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         err = max(err, abs(shape%radius_dir(u) - ellipsoid_radius(ax(1), ax(2), ax(3), u)))
+      end do
+   end function ellipsoid_error
+
+   subroutine test_ellipsoids(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: nell = 3
+      real(wp), parameter :: axes(3, nell) = reshape([1.0_wp, 0.8_wp, 0.6_wp, 0.9_wp, 0.9_wp, 0.55_wp, &
+                                                       1.1_wp, 0.7_wp, 0.7_wp], [3, nell])
+      type(contact_body_type) :: body(nell)
+      type(sh_expansion_type) :: shape
+      type(contact_params_type) :: par, cert
+      type(rng_type) :: rng
+      real(wp) :: err(nell), rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), f1, dstar, delta
+      integer :: k, n, ia, ib, nwrong, nwrong_cert, ntested, nband, nfp_cert
+      logical :: expect
+      do k = 1, nell
+         shape = ellipsoid_shape(axes(1, k), axes(2, k), axes(3, k), ell_order)
+         err(k) = ellipsoid_error(shape, axes(:, k))
+         call new_contact_body(body(k), shape, error)
+         if (allocated(error)) return
+      end do
+      cert%certified = .true.
+      call new_rng(rng, 5_i8, 2_i8)
+      nwrong = 0
+      nwrong_cert = 0
+      nfp_cert = 0
+      ntested = 0
+      nband = 0
+      ca = [0.0_wp, 0.0_wp, 0.0_wp]
+      do n = 1, 12000
+         ia = 1 + mod(n, nell)
+         ib = 1 + mod(n / nell, nell)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         ! F scales with the square of the distance: the contact distance along u is 1/sqrt(F(u))
+         f1 = pw_function(rota, axes(:, ia), rotb, axes(:, ib), u)
+         dstar = 1.0_wp / sqrt(f1)
+         delta = 0.2_wp * (2.0_wp * rng%uniform() - 1.0_wp)
+         if (abs(delta) < ell_band) then
+            nband = nband + 1
+            cycle
+         end if
+         cb = ca + dstar * (1.0_wp + delta) * u
+         expect = delta < 0.0_wp
+         ntested = ntested + 1
+         if (bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, par) .neqv. expect) &
+            nwrong = nwrong + 1
+         if (bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, cert)) then
+            if (.not. expect) nfp_cert = nfp_cert + 1
+         else
+            if (expect) nwrong_cert = nwrong_cert + 1
+         end if
+      end do
+      write (output_unit, '(a,i0,a,es9.2,a,f6.3,a,i0,a,i0,a,i0,a,i0)') "    order ", ell_order, &
+         ", max |r_N - r_exact| = ", maxval(err), ", band |d/d*-1| < ", ell_band, ": tested ", ntested, &
+         ", wrong (default) ", nwrong, &
+         ", certified: false negatives ", nwrong_cert, ", false positives ", nfp_cert
+      call check(error, ntested >= 10000, "fewer than 10000 ellipsoid pairs outside the band")
+      if (allocated(error)) return
+      call check(error, nwrong + nwrong_cert, 0, "ellipsoid decisions disagreeing with Perram-Wertheim")
+      if (allocated(error)) return
+      call check(error, nfp_cert <= ntested / 10, "certified false positives above 10%")
+   end subroutine test_ellipsoids
+
+   !> Dense reference: body-frame surface points of a shape on a (nt x 2nt) grid.
+   subroutine dense_points(shape, nt, pts)
+      type(sh_expansion_type), intent(in) :: shape
+      integer, intent(in) :: nt
+      real(wp), allocatable, intent(out) :: pts(:, :)
+      integer :: i, j, k
+      real(wp) :: th, ph, u(3)
+      allocate (pts(3, 2 * nt * nt))
+      k = 0
+      do j = 1, 2 * nt
+         ph = pi * (j - 0.37_wp) / nt
+         do i = 1, nt
+            th = pi * (i - 0.61_wp) / nt
+            u = [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)]
+            k = k + 1
+            pts(:, k) = shape%radius_dir(u) * u
+         end do
+      end do
+   end subroutine dense_points
+
+   !> Largest radial penetration (world units) of A's dense points into B.
+   function dense_depth(pts, ca, rota, sa, shape_b, cb, rotb, sb) result(depth)
+      real(wp), intent(in) :: pts(:, :), ca(3), rota(3, 3), sa, cb(3), rotb(3, 3), sb
+      type(sh_expansion_type), intent(in) :: shape_b
+      real(wp) :: depth, x(3), y(3), d
+      integer :: k
+      depth = 0.0_wp
+      do k = 1, size(pts, 2)
+         x = body_to_world(rota, ca, sa, pts(:, k))
+         y = world_to_body(rotb, cb, sb, x)
+         d = norm2(y)
+         depth = max(depth, (shape_b%radius_dir(y) - d) * sb)
+      end do
+   end function dense_depth
+
+   subroutine test_real_shapes(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: nshape = 4, npair = 160, nnbox = 4
+      character(len=5), parameter :: ids(nshape) = ["00002", "00009", "00035", "00061"]
+      integer, parameter :: nboxes(nnbox) = [32, 64, 128, 256]
+      character(len=:), allocatable :: dir
+      type(sh_expansion_type) :: shape(nshape)
+      type(contact_body_type) :: body(nshape)
+      type(contact_params_type) :: par, cert
+      type(rng_type) :: rng
+      type(real_pts_type), allocatable :: pts(:)
+      real(wp) :: rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), lo, hi, mid, depth, lmin, dref
+      integer :: k, n, ia, ib, it, ib2, nover, fneg(nnbox), fpos(nnbox), fneg_big(nnbox), fneg_cert, fpos_cert
+      logical :: ref, got
+      call shapes_dir(dir, error)
+      if (allocated(error)) return
+      allocate (pts(nshape))
+      do k = 1, nshape
+         call load_shape_file(dir//"/MA111-7-coarse/MA111-7-coarse-anm-"//ids(k)//".dat", shape(k), error)
+         if (allocated(error)) return
+         call new_contact_body(body(k), shape(k), error, nused=14)
+         if (allocated(error)) return
+         call dense_points(body(k)%shape, 120, pts(k)%p)
+      end do
+      cert%certified = .true.
+      call new_rng(rng, 21_i8, 4_i8)
+      fneg = 0
+      fpos = 0
+      fneg_big = 0
+      fneg_cert = 0
+      fpos_cert = 0
+      nover = 0
+      ca = [0.0_wp, 0.0_wp, 0.0_wp]
+      do n = 1, npair
+         ia = 1 + mod(n, nshape)
+         ib = 1 + mod(n / nshape, nshape)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         ! contact distance along u by bisection on D_overlap at N_box = 256, then a random offset
+         lo = body(ia)%r_min + body(ib)%r_min
+         hi = body(ia)%r_max + body(ib)%r_max
+         do it = 1, 22
+            mid = 0.5_wp * (lo + hi)
+            if (overlap_depth(body(ia), ca, rota, 1.0_wp, body(ib), mid * u, rotb, 1.0_wp, 256) > 0.0_wp) then
+               lo = mid
+            else
+               hi = mid
+            end if
+         end do
+         cb = hi * (1.0_wp + 0.02_wp * (2.0_wp * rng%uniform() - 1.0_wp)) * u
+         dref = max(dense_depth(pts(ia)%p, ca, rota, 1.0_wp, body(ib)%shape, cb, rotb, 1.0_wp), &
+                    dense_depth(pts(ib)%p, cb, rotb, 1.0_wp, body(ia)%shape, ca, rota, 1.0_wp))
+         ref = dref > 0.0_wp
+         if (ref) nover = nover + 1
+         lmin = min(maxval(body(ia)%box_hi - body(ia)%box_lo), maxval(body(ib)%box_hi - body(ib)%box_lo))
+         do ib2 = 1, nnbox
+            par%nbox = nboxes(ib2)
+            got = bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, par)
+            if (ref .and. .not. got) then
+               fneg(ib2) = fneg(ib2) + 1
+               if (dref >= 0.005_wp * lmin) fneg_big(ib2) = fneg_big(ib2) + 1
+            end if
+            if (got .and. .not. ref) fpos(ib2) = fpos(ib2) + 1
+         end do
+         got = bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, cert)
+         if (ref .and. .not. got) fneg_cert = fneg_cert + 1
+         if (got .and. .not. ref) fpos_cert = fpos_cert + 1
+         depth = overlap_depth(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, 256)
+         if (depth > dref * 1.5_wp + 1.0e-3_wp * lmin) then
+            call fatal_error(error, "D_overlap "//to_string(depth)//" exceeds the dense reference " &
+                             //to_string(dref))
+            return
+         end if
+      end do
+      write (output_unit, '(a,i0,a,i0,a)') "    ", npair, " pairs, ", nover, " overlapping (dense reference)"
+      do ib2 = 1, nnbox
+         write (output_unit, '(a,i4,a,i3,a,i3,a,i3)') "    N_box ", nboxes(ib2), ": false negatives ", fneg(ib2), &
+            " (depth >= 0.5% L: ", fneg_big(ib2), "), false positives ", fpos(ib2)
+      end do
+      write (output_unit, '(a,i3,a,i3)') "    certified: false negatives ", fneg_cert, ", false positives ", fpos_cert
+      call check(error, nover > npair / 4 .and. nover < 3 * npair / 4, "expected about half the pairs to overlap")
+      if (allocated(error)) return
+      call check(error, fneg_big(3), 0, "false negatives >= 0.5% L at the default N_box")
+      if (allocated(error)) return
+      call check(error, fneg_cert, 0, "certified false negatives")
+   end subroutine test_real_shapes
+
+   subroutine test_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      real(wp), parameter :: ax(3) = [1.0_wp, 0.7_wp, 0.5_wp]
+      type(contact_body_type) :: body, sph
+      type(rng_type) :: rng
+      real(wp) :: rot(3, 3), c(3), h(3), box(3), err, margin, s
+      integer :: n, k, nwrong, nsph, nconservative
+      logical :: got
+      real(wp), parameter :: wall_band = 0.06_wp
+      type(sh_expansion_type) :: shape
+      shape = ellipsoid_shape(ax(1), ax(2), ax(3), ell_order)
+      err = ellipsoid_error(shape, ax)
+      call new_contact_body(body, shape, error)
+      if (allocated(error)) return
+      call new_contact_body(sph, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      call new_rng(rng, 8_i8, 3_i8)
+      box = [5.0_wp, 6.0_wp, 7.0_wp]
+      nwrong = 0
+      nsph = 0
+      nconservative = 0
+      do n = 1, 20000
+         rot = random_rotation(rng)
+         s = 0.5_wp + rng%uniform()
+         c = box * [rng%uniform(), rng%uniform(), rng%uniform()]
+         do k = 1, 3
+            h(k) = s * sqrt(sum((rot(k, :) * ax)**2))
+         end do
+         margin = minval(min(c - h, box - c - h))
+         got = body_crosses_walls(body, c, rot, s, box)
+         ! crossing by more than the expansion error must be seen ("false" is guaranteed)
+         if (margin < -2.0_wp * s * err - 1.0e-9_wp .and. .not. got) nwrong = nwrong + 1
+         ! clear of the walls by more than the band must be "false"
+         if (margin > wall_band * s .and. got) nwrong = nwrong + 1
+         if (got .and. margin > 2.0_wp * s * err) nconservative = nconservative + 1
+         margin = minval(min(c - s, box - c - s))
+         if (abs(margin) > 1.0e-9_wp) then
+            if (body_crosses_walls(sph, c, rot, s, box) .neqv. (margin <= 0.0_wp)) nsph = nsph + 1
+         end if
+      end do
+      write (output_unit, '(a,i0,a,f5.3,a)') "    walls: ", nconservative, &
+         " conservative 'touching' answers for clear gaps below ", wall_band, " x scale"
+      call check(error, nwrong + nsph, 0, "wall decisions (ellipsoid "//to_string(nwrong)//", sphere " &
+                 //to_string(nsph)//")")
+   end subroutine test_walls
+
+   subroutine test_newton_raphson(error)
+      type(error_type), allocatable, intent(out) :: error
+      real(wp), parameter :: ax(3) = [1.0_wp, 0.8_wp, 0.6_wp]
+      type(contact_body_type) :: ell, sa, sb
+      type(contact_params_type) :: nr
+      type(rng_type) :: rng
+      real(wp) :: rota(3, 3), rotb(3, 3), u(3), cb(3), f1, dstar, delta, gap
+      integer :: n, fp, fnn, novl, nsph
+      logical :: expect, got
+      nr%method = contact_method%newton_raphson
+      call new_contact_body(sa, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      call new_contact_body(sb, sphere_shape(0.5_wp), error)
+      if (allocated(error)) return
+      call new_contact_body(ell, ellipsoid_shape(ax(1), ax(2), ax(3), ell_order), error)
+      if (allocated(error)) return
+      call new_rng(rng, 9_i8, 5_i8)
+      nsph = 0
+      do n = 1, 2000
+         rota = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         gap = merge(1.0e-9_wp, -1.0e-9_wp, mod(n, 2) == 0)
+         if (bodies_overlap(sa, [0.0_wp, 0.0_wp, 0.0_wp], rota, 1.0_wp, sb, (1.5_wp + gap) * u, rota, 1.0_wp, nr) &
+             .neqv. gap < 0.0_wp) nsph = nsph + 1
+      end do
+      fp = 0
+      fnn = 0
+      novl = 0
+      do n = 1, 300
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         f1 = pw_function(rota, ax, rotb, ax, u)
+         dstar = 1.0_wp / sqrt(f1)
+         delta = sign(0.05_wp + 0.15_wp * rng%uniform(), rng%uniform() - 0.5_wp)
+         cb = dstar * (1.0_wp + delta) * u
+         expect = delta < 0.0_wp
+         if (expect) novl = novl + 1
+         got = bodies_overlap(ell, [0.0_wp, 0.0_wp, 0.0_wp], rota, 1.0_wp, ell, cb, rotb, 1.0_wp, nr)
+         if (got .and. .not. expect) fp = fp + 1
+         if (expect .and. .not. got) fnn = fnn + 1
+      end do
+      write (output_unit, '(a,i0,a,i0,a,i0,a,i0)') "    NR: sphere errors ", nsph, "; ellipsoids 5-20% from contact: ", &
+         novl, " overlapping, missed ", fnn, ", false positives ", fp
+      call check(error, nsph + fp, 0, "Newton-Raphson wrong on spheres or false positive")
+      if (allocated(error)) return
+      call check(error, fnn <= novl / 5, "Newton-Raphson misses more than 20% of clear overlaps")
+   end subroutine test_newton_raphson
+end module test_contact
