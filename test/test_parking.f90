@@ -9,6 +9,9 @@ module test_parking
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_geometry_rotation, only: random_rotation
+   use anm_parking_config, only: run_config_type, read_config
+   use anm_parking_engine, only: run_parking, particle_kind_type
+   use anm_io_model, only: write_model, read_model
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -26,7 +29,13 @@ contains
               new_unittest("verify: separated spheres pass", test_verify_clear), &
               new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
               new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
-              new_unittest("verify: a particle through a wall fails", test_verify_wall)]
+              new_unittest("verify: a particle through a wall fails", test_verify_wall), &
+              new_unittest("RSA of spheres approaches saturation (>= 0.36)", test_rsa_spheres), &
+              new_unittest("synthetic mortar reaches every target within 1 % and verifies", test_small_job), &
+              new_unittest("walls: particles stay inside and verify passes", test_walls_job), &
+              new_unittest("same seed gives the same model, another seed another", test_reproducible), &
+              new_unittest("an unreachable target ends with a shortfall, not a loop", test_shortfall), &
+              new_unittest("an unreadable shape folder names the variable", test_bad_source)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -157,4 +166,116 @@ contains
                                      [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
       call check(error, rep%wall_violations, 1, "wall crossing not found")
    end subroutine test_verify_wall
+   subroutine run_nml(name, text, model, error)
+      character(len=*), intent(in) :: name, text
+      type(model_type), intent(out) :: model
+      type(error_type), allocatable, intent(out) :: error
+      type(run_config_type) :: cfg
+      type(particle_kind_type), allocatable :: kinds(:)
+      integer, allocatable :: kind_of(:)
+      integer :: unit
+      call execute_command_line("mkdir -p build/test-tmp")
+      open (newunit=unit, file="build/test-tmp/"//name, status="replace", action="write")
+      write (unit, '(a)') text
+      close (unit)
+      call read_config("build/test-tmp/"//name, cfg, error)
+      if (allocated(error)) return
+      call run_parking(cfg, model, kinds, kind_of, error)
+   end subroutine run_nml
+
+   subroutine test_rsa_spheres(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: rep
+      ! random sequential addition saturates at 0.3841 (Torquato et al. 2006); a large budget
+      ! per particle brings a small periodic box close to it
+      call run_nml("rsa.nml", "&box length = 12, 12, 12, periodic = .true. /"//new_line("a")// &
+                   "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.384, source = 'sphere', order = 0 /" &
+                   //new_line("a")//"&parking max_locations = 200000 /", m, error)
+      if (allocated(error)) return
+      print '(a,f7.4,a,i0,a)', "        RSA spheres: packing fraction ", m%achieved_fraction(1), " (", m%count(1), &
+         " spheres)"
+      call check(error, m%achieved_fraction(1) >= 0.36_wp, "RSA density below 0.36")
+      if (allocated(error)) return
+      call verify_model(m, 40, rep)
+      call check(error, rep%overlapping_pairs == 0_i8, "verify found overlapping spheres")
+   end subroutine test_rsa_spheres
+
+   subroutine test_small_job(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: rep
+      integer :: s
+      call run_nml("small.nml", "&box length = 8, 8, 8 /"//new_line("a")// &
+                   "&sieves nsieve = 3, min_width = 2.0, 1.0, 0.5, max_width = 2.4, 1.2, 0.6, fraction = 0.12, 0.08, 0.05, " &
+                   //"order = 10, 6, 4 /"//new_line("a")//"&synthetic count = 6 /"//new_line("a")//"&run seed = 3 /", m, error)
+      if (allocated(error)) return
+      do s = 1, 3
+         print '(a,i0,a,f7.4,a,f7.4,a,i0)', "        sieve ", s, ": ", m%achieved_fraction(s), " of ", &
+            m%target_fraction(s), ", particles ", m%count(s)
+         call check(error, m%achieved_fraction(s), m%target_fraction(s), "sieve target", thr=0.01_wp)
+         if (allocated(error)) return
+      end do
+      call verify_model(m, 60, rep)
+      print '(a,i0,a,i0,a,es9.2)', "        verify: ", rep%pairs_checked, " pairs, ", rep%overlapping_pairs, &
+         " overlapping, deepest ", rep%max_depth
+      call check(error, rep%overlapping_pairs == 0_i8, "verify found overlaps")
+   end subroutine test_small_job
+
+   subroutine test_walls_job(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: rep
+      call run_nml("walls.nml", "&box length = 8, 8, 8, periodic = .false. /"//new_line("a")// &
+                   "&sieves nsieve = 2, min_width = 2.0, 1.0, max_width = 2.4, 1.2, fraction = 0.15, 0.08, order = 8, 6 /" &
+                   //new_line("a")//"&synthetic count = 6 /", m, error)
+      if (allocated(error)) return
+      call verify_model(m, 60, rep)
+      call check(error, rep%wall_violations == 0 .and. rep%overlapping_pairs == 0_i8, "walls or overlaps violated")
+      if (allocated(error)) return
+      call check(error, m%achieved_fraction(1), 0.15_wp, "first sieve", thr=0.01_wp)
+   end subroutine test_walls_job
+
+   subroutine test_reproducible(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b, c
+      character(len=*), parameter :: base = "&box length = 6, 6, 6 /"//new_line("a")// &
+         "&sieves nsieve = 2, min_width = 1.5, 0.6, max_width = 2.0, 0.8, fraction = 0.1, 0.05, order = 8, 4 /" &
+         //new_line("a")//"&synthetic count = 4 /"//new_line("a")
+      call run_nml("repro1.nml", base//"&run seed = 9 /", a, error)
+      if (allocated(error)) return
+      call run_nml("repro2.nml", base//"&run seed = 9 /", b, error)
+      if (allocated(error)) return
+      call run_nml("repro3.nml", base//"&run seed = 10 /", c, error)
+      if (allocated(error)) return
+      call check(error, a%np == b%np .and. all(a%center == b%center) .and. all(a%rotation == b%rotation) &
+                 .and. all(a%scale == b%scale) .and. all(a%shape == b%shape), "same seed, different model")
+      if (allocated(error)) return
+      call check(error, a%np /= c%np .or. any(a%center(:, :min(a%np, c%np)) /= c%center(:, :min(a%np, c%np))), &
+                 "different seed, same model")
+   end subroutine test_reproducible
+
+   subroutine test_shortfall(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      ! spheres cannot reach 0.6 by random sequential addition
+      call run_nml("short.nml", "&box length = 8, 8, 8 /"//new_line("a")// &
+                   "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.6, source = 'sphere', order = 0 /" &
+                   //new_line("a")//"&parking max_locations = 200 /", m, error)
+      if (allocated(error)) return
+      call check(error, m%achieved_fraction(1) < 0.45_wp .and. m%count(1) > 10, "shortfall not reported")
+   end subroutine test_shortfall
+
+   subroutine test_bad_source(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(error_type), allocatable :: err
+      call run_nml("badsrc.nml", "&box length = 8, 8, 8 /"//new_line("a")// &
+                   "&sieves nsieve = 1, min_width = 2, max_width = 2.2, fraction = 0.1, source = 'no/such/folder' /", m, err)
+      call check(error, allocated(err), "missing shape folder accepted")
+      if (allocated(error)) return
+      print '(a)', "        refused as expected: "//err%message
+      call check(error, index(err%message, "source") > 0 .and. index(err%message, "no/such/folder") > 0, &
+                 "message must name the variable and the folder: "//err%message)
+   end subroutine test_bad_source
 end module test_parking

@@ -65,7 +65,7 @@ module anm_parking_config
       !> Contact method name ("eob" or "newton_raphson"), N_ext, N_box and certified mode.
       character(len=32) :: contact_method = "eob"
       !> N_ext and N_box.
-      integer :: n_ext = 40, n_box = 90
+      integer :: n_ext = 40, n_box = 128
       !> Certified contact.
       logical :: certified = .false.
       !> Shells: number of layers, cumulative thicknesses, unit ("mm" or "fraction" of length).
