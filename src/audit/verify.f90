@@ -46,7 +46,13 @@ module anm_audit_verify
       integer :: nt = 0, np = 0
       real(wp), allocatable :: x(:, :, :)   ! (3, nt, np) surface points
       real(wp) :: rmax = 0.0_wp
+      !> Blocks of block x block samples: bounding ball centre (3, nbt, nbp) and radius.
+      integer :: nbt = 0, nbp = 0
+      real(wp), allocatable :: bc(:, :, :), br(:, :)
    end type sampled_type
+
+   !> Samples per block edge.
+   integer, parameter :: block = 6
 
 contains
 
@@ -181,13 +187,12 @@ contains
       end function wrap
 
       !> Largest radial penetration of A's sampled surface points into B (mm), 0 if none. Only
-      !> the sample directions inside the cone that B's bounding sphere subtends from A's centre
-      !> are visited.
+      !> the blocks of samples whose bounding balls meet B's bounding sphere are visited.
       function pair_depth(a, ca, b, cb) result(depth)
          integer, intent(in) :: a, b
          real(wp), intent(in) :: ca(3), cb(3)
-         real(wp) :: depth, x(3), y(3), ly, sa, sb, m(3, 3), t(3), d(3), ld, rb, rb2, alpha, thd, th0, th1, dph, phd
-         integer :: i, j, jj, i0, i1, j0, j1
+         real(wp) :: depth, x(3), y(3), ly, sa, sb, m(3, 3), t(3), d(3), rb, rb2
+         integer :: i, j, ib, jb
          depth = 0.0_wp
          sa = model%scale(a)
          sb = model%scale(b)
@@ -196,43 +201,25 @@ contains
             d = matmul(cb - ca, model%rotation(:, :, a)) / sa
             rb = rho(b) / sa
             rb2 = rb * rb
-            ld = norm2(d)
             ! A body -> B body: y = m x + t
             m = matmul(transpose(model%rotation(:, :, b)), model%rotation(:, :, a)) * (sa / sb)
             t = matmul(ca - cb, model%rotation(:, :, b)) / sb
-            i0 = 1
-            i1 = sp%nt
-            j0 = 1
-            j1 = sp%np
-            if (ld > rb) then
-               alpha = asin(min(1.0_wp, rb / ld))
-               thd = acos(max(-1.0_wp, min(1.0_wp, d(3) / ld)))
-               th0 = thd - alpha
-               th1 = thd + alpha
-               i0 = max(1, floor(th0 / pi * sp%nt))
-               i1 = min(sp%nt, ceiling(th1 / pi * sp%nt) + 1)
-               if (th0 > 0.0_wp .and. th1 < pi) then
-                  dph = asin(min(1.0_wp, sin(alpha) / min(sin(th0), sin(th1)) * 1.0000001_wp))
-                  if (min(sin(th0), sin(th1)) <= sin(alpha)) dph = pi
-                  if (dph < pi) then
-                     phd = atan2(d(2), d(1))
-                     j0 = floor((phd - dph) / (2.0_wp * pi) * sp%np)
-                     j1 = ceiling((phd + dph) / (2.0_wp * pi) * sp%np) + 1
-                  end if
-               end if
-            end if
-            do jj = j0, j1
-               j = 1 + modulo(jj - 1, sp%np)
-               do i = i0, i1
-                  x = sp%x(:, i, j)
-                  if (sum((x - d)**2) >= rb2) cycle
-                  y = matmul(m, x) + t
-                  ly = norm2(y)
-                  if (ly == 0.0_wp) then
-                     depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
-                  else
-                     depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
-                  end if
+            do jb = 1, sp%nbp
+               do ib = 1, sp%nbt
+                  if (sum((sp%bc(:, ib, jb) - d)**2) >= (rb + sp%br(ib, jb))**2) cycle
+                  do j = (jb - 1) * block + 1, min(sp%np, jb * block)
+                     do i = (ib - 1) * block + 1, min(sp%nt, ib * block)
+                        x = sp%x(:, i, j)
+                        if (sum((x - d)**2) >= rb2) cycle
+                        y = matmul(m, x) + t
+                        ly = norm2(y)
+                        if (ly == 0.0_wp) then
+                           depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
+                        else
+                           depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
+                        end if
+                     end do
+                  end do
                end do
             end do
          end associate
@@ -259,8 +246,8 @@ contains
       type(sh_expansion_type), intent(in) :: shape
       integer, intent(in) :: order, resolution
       type(sampled_type), intent(inout) :: samp
-      real(wp) :: th, ph, u(3), r
-      integer :: i, j
+      real(wp) :: th, ph, u(3), r, c(3), rr
+      integer :: i, j, ib, jb
       samp%s = sh_truncate(shape, order)
       samp%nt = resolution
       samp%np = 2 * resolution
@@ -279,5 +266,24 @@ contains
       ! bounding radius: the largest sample times a margin far above the variation of r within
       ! one grid cell at the orders used (checked against a grid twice as fine in the tests)
       samp%rmax = 1.02_wp * samp%rmax
+      samp%nbt = (samp%nt + block - 1) / block
+      samp%nbp = (samp%np + block - 1) / block
+      allocate (samp%bc(3, samp%nbt, samp%nbp), samp%br(samp%nbt, samp%nbp))
+      do jb = 1, samp%nbp
+         do ib = 1, samp%nbt
+            associate (pts => samp%x(:, (ib - 1) * block + 1:min(samp%nt, ib * block), &
+                                     (jb - 1) * block + 1:min(samp%np, jb * block)))
+               c = sum(sum(pts, dim=3), dim=2) / real(size(pts, 2) * size(pts, 3), wp)
+               rr = 0.0_wp
+               do j = 1, size(pts, 3)
+                  do i = 1, size(pts, 2)
+                     rr = max(rr, norm2(pts(:, i, j) - c))
+                  end do
+               end do
+               samp%bc(:, ib, jb) = c
+               samp%br(ib, jb) = rr
+            end associate
+         end do
+      end do
    end subroutine sample_shape
 end module anm_audit_verify
