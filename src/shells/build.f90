@@ -18,7 +18,7 @@ module anm_shells_build
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
    use anm_sh_grid, only: sh_analyze, sh_synthesize
    use anm_shells_surface, only: shell_surface_type, new_shell_surface
-   use anm_shells_offset, only: offset_radius
+   use anm_shells_offset, only: offset_grid, offset_counts_type
    implicit none
    private
 
@@ -43,6 +43,10 @@ module anm_shells_build
       integer :: newton = 0
       !> Directions that needed the distance-definition fallback.
       integer :: fallback = 0
+      !> Newton directions whose root came from a neighbour's foot (continuation across creases).
+      integer :: continued = 0
+      !> Exact evaluations of the particle expansion spent in the Newton iterations.
+      integer :: evaluations = 0
       !> Order of the fitted outer expansion.
       integer :: order = 0
       !> Largest |R_t - fitted| over the grid nodes.
@@ -200,23 +204,15 @@ contains
       real(wp), intent(in) :: t
       real(wp), intent(out) :: rt(:, :)
       type(shell_report_type), intent(inout) :: report
-      integer :: i, j
-      logical :: fb
+      type(offset_counts_type) :: counts
 
+      call offset_grid(surf, t, rt, counts)
       report%thickness = t
       report%directions = size(rt)
-      report%newton = 0
-      report%fallback = 0
-      do j = 1, size(rt, 2)
-         do i = 1, size(rt, 1)
-            call offset_radius(surf, surf%grid%sphere%theta(i), surf%grid%sphere%phi(j), t, rt(i, j), fb)
-            if (fb) then
-               report%fallback = report%fallback + 1
-            else
-               report%newton = report%newton + 1
-            end if
-         end do
-      end do
+      report%newton = counts%newton
+      report%fallback = counts%fallback
+      report%continued = counts%continued
+      report%evaluations = counts%evaluations
    end subroutine outer_radii
 
    !> Fit R_t by quadrature: order `cap`, or (search) the smallest order <= cap whose residual at

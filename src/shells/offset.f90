@@ -18,10 +18,31 @@ module anm_shells_offset
    implicit none
    private
 
-   public :: offset_radius, offset_newton
+   public :: offset_radius, offset_newton, offset_grid, offset_counts_type
 
    !> Relative tolerance on distances (of t) when validating a Newton root.
    real(wp), parameter :: distance_tol = 1.0e-7_wp
+   !> Newton step (radians) below which the root is finished by a second-order Taylor step
+   !> (the error of R_t is then of the order of the cube of this step times the third derivatives).
+   real(wp), parameter :: finish_step = 3.0e-4_wp
+   !> Tolerance (relative to rmax + t) below the sampled lower bound at which a root is rejected.
+   real(wp), parameter :: bound_tol = 1.0e-9_wp
+   !> Feet of grid-adjacent directions farther apart than this many hmax mark a crease.
+   real(wp), parameter :: jump_factor = 2.0_wp
+   !> Largest number of continuation passes over the grid.
+   integer, parameter :: max_passes = 30
+
+   !> How the directions of one grid were solved.
+   type :: offset_counts_type
+      !> Directions solved by Newton (Eq 2.1), from the sampled start or by continuation.
+      integer :: newton = 0
+      !> Directions whose root came from a neighbour's foot (continuation across creases).
+      integer :: continued = 0
+      !> Directions that needed the distance-definition fallback.
+      integer :: fallback = 0
+      !> Exact evaluations of the particle expansion spent in Newton iterations.
+      integer :: evaluations = 0
+   end type offset_counts_type
 
 contains
 
@@ -56,6 +77,355 @@ contains
          call definition_radius(surf, u, t, rt)
       end if
    end subroutine offset_radius
+
+   !> R_t at every node of the surface's own grid.
+   !>
+   !> 1. Sampled bound and start: R_t(u) = max over surface points x of
+   !>    g_u(x) = u . x + sqrt(t^2 - |x - (u . x) u|^2) (the farthest point of the ray within t of x),
+   !>    so every sample gives a lower bound. Each sample's value is spread to the directions near
+   !>    its offset direction (x_s + t n_s) / |x_s + t n_s| (within the angle its grid neighbours'
+   !>    offset directions span, plus one spacing); per direction the best sample is the start and
+   !>    its g the lower bound m(u). Where no sample is within t of the ray (thin shells), the start
+   !>    is the sample whose offset direction is best aligned with u.
+   !> 2. Newton (Eq 2.1) from the start: the first step uses the tabulated derivatives, later steps
+   !>    the exact expansion; finished by a second-order Taylor step once the step is below
+   !>    `finish_step`. Accepted when beta > 0, u . n > 0, the foot is a strict local minimum of the
+   !>    distance (1 - t kappa_i > 0) and R >= m(u) (a root below a sampled point is the wrong sheet).
+   !> 3. Continuation: where the feet of adjacent directions jump (a crease: two sheets of the offset
+   !>    surface) or Newton failed, Newton is restarted from the neighbours' feet and the largest
+   !>    accepted root kept (R_t is the maximum over the sheets), pass after pass until nothing changes.
+   !> 4. Directions still unsolved use the definition (`definition_radius`).
+   pure subroutine offset_grid(surf, t, rt, counts)
+      !> Surface data of the particle (its grid is the direction grid).
+      type(shell_surface_type), intent(in) :: surf
+      !> Thickness (> 0).
+      real(wp), intent(in) :: t
+      !> R_t(i, j) at node (i, j).
+      real(wp), intent(out) :: rt(:, :)
+      !> How the directions were solved.
+      type(offset_counts_type), intent(out) :: counts
+      real(wp), allocatable :: lower(:, :), foot(:, :, :), fx(:, :, :)
+      integer, allocatable :: start(:, :, :)
+      logical, allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
+      real(wp) :: ts, ps, rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
+      integer :: nt, np, i, j, k, ii, jj, pass, nev
+      logical :: ok, any_change
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      allocate (lower(nt, np), start(2, nt, np), foot(2, nt, np), fx(3, nt, np), solved(nt, np), &
+                from_nb(nt, np), changed(nt, np), dirty(nt, np))
+      call sampled_starts(surf, t, lower, start)
+      tol = bound_tol * (surf%rmax + t)
+      jump2 = (jump_factor * surf%hmax)**2
+      from_nb = .false.
+      do j = 1, np
+         do i = 1, nt
+            call node_frame(surf, i, j, u, e1, e2)
+            ts = surf%grid%sphere%theta(start(1, i, j))
+            ps = surf%grid%sphere%phi(start(2, i, j))
+            call foot_newton(surf, u, e1, e2, t, surf%r(i, j), ts, ps, rho, xf, ok, nev, &
+                             surf%f(:, start(1, i, j), start(2, i, j)))
+            counts%evaluations = counts%evaluations + nev
+            solved(i, j) = ok .and. rho >= lower(i, j) - tol
+            rt(i, j) = merge(rho, 0.0_wp, solved(i, j))
+            foot(:, i, j) = [ts, ps]
+            fx(:, i, j) = xf
+         end do
+      end do
+      ! continuation across creases and from solved neighbours
+      dirty = .true.
+      do pass = 1, max_passes
+         any_change = .false.
+         changed = .false.
+         do j = 1, np
+            do i = 1, nt
+               if (.not. dirty(i, j)) cycle
+               do k = 1, 4
+                  call neighbour(i, j, k, nt, np, ii, jj)
+                  if (.not. solved(ii, jj)) cycle
+                  if (solved(i, j)) then
+                     if (sum((fx(:, i, j) - fx(:, ii, jj))**2) <= jump2) cycle
+                  end if
+                  call node_frame(surf, i, j, u, e1, e2)
+                  th = foot(1, ii, jj)
+                  ph = foot(2, ii, jj)
+                  call foot_newton(surf, u, e1, e2, t, surf%r(i, j), th, ph, rho, xf, ok, nev)
+                  counts%evaluations = counts%evaluations + nev
+                  if (.not. (ok .and. rho >= lower(i, j) - tol)) cycle
+                  if (solved(i, j)) then
+                     if (rho <= rt(i, j) + tol) cycle
+                  end if
+                  rt(i, j) = rho
+                  solved(i, j) = .true.
+                  from_nb(i, j) = .true.
+                  foot(:, i, j) = [th, ph]
+                  fx(:, i, j) = xf
+                  changed(i, j) = .true.
+                  any_change = .true.
+               end do
+            end do
+         end do
+         if (.not. any_change) exit
+         ! next pass: the changed nodes and their neighbours
+         dirty = .false.
+         do j = 1, np
+            do i = 1, nt
+               if (.not. changed(i, j)) cycle
+               dirty(i, j) = .true.
+               do k = 1, 4
+                  call neighbour(i, j, k, nt, np, ii, jj)
+                  dirty(ii, jj) = .true.
+               end do
+            end do
+         end do
+      end do
+      counts%newton = count(solved)
+      counts%continued = count(from_nb .and. solved)
+      counts%fallback = count(.not. solved)
+      do j = 1, np
+         do i = 1, nt
+            if (solved(i, j)) cycle
+            call definition_radius(surf, surf%u(:, i, j), t, rt(i, j))
+         end do
+      end do
+   end subroutine offset_grid
+
+   !> Unit direction and the two perpendicular unit vectors (theta-hat, phi-hat) of node (i, j).
+   pure subroutine node_frame(surf, i, j, u, e1, e2)
+      type(shell_surface_type), intent(in) :: surf
+      integer, intent(in) :: i, j
+      real(wp), intent(out) :: u(3), e1(3), e2(3)
+      real(wp) :: st, ct, cp, sp
+      st = surf%grid%sphere%sint(i)
+      ct = surf%grid%sphere%x(i)
+      cp = cos(surf%grid%sphere%phi(j))
+      sp = sin(surf%grid%sphere%phi(j))
+      u = [st * cp, st * sp, ct]
+      e1 = [ct * cp, ct * sp, -st]
+      e2 = [-sp, cp, 0.0_wp]
+   end subroutine node_frame
+
+   !> Neighbour k (1..4: theta -, theta +, phi -, phi +) of node (i, j).
+   !> Beyond the first and last rings the neighbour is the same ring across the pole.
+   pure subroutine neighbour(i, j, k, nt, np, ii, jj)
+      integer, intent(in) :: i, j, k, nt, np
+      integer, intent(out) :: ii, jj
+      ii = i
+      jj = j
+      select case (k)
+      case (1)
+         ii = i - 1
+      case (2)
+         ii = i + 1
+      case (3)
+         jj = 1 + modulo(j - 2, np)
+      case default
+         jj = 1 + modulo(j, np)
+      end select
+      if (ii < 1 .or. ii > nt) then
+         ii = i
+         jj = 1 + modulo(j - 1 + np / 2, np)
+      end if
+   end subroutine neighbour
+
+   !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
+   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
+   pure subroutine sampled_starts(surf, t, lower, start)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: t
+      real(wp), intent(out) :: lower(:, :)
+      integer, intent(out) :: start(:, :, :)
+      real(wp), allocatable :: qd(:, :, :), align(:, :)
+      real(wp) :: q(3), cmin, alpha, calpha, margin, thq, phq, width, du, perp2, g, xx, t2, c, dphi
+      integer :: nt, np, i, j, k, ii, jj, i0, i1, ia, ja, jc, ncol, j0
+      logical :: all_phi
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      dphi = two_pi / np
+      allocate (qd(3, nt, np), align(nt, np))
+      do j = 1, np
+         do i = 1, nt
+            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            qd(:, i, j) = q / norm2(q)
+         end do
+      end do
+      lower = -huge(1.0_wp)
+      align = -2.0_wp
+      do j = 1, np
+         do i = 1, nt
+            start(:, i, j) = [i, j]
+         end do
+      end do
+      margin = 1.5_wp * pi / nt
+      t2 = t * t
+      do j = 1, np
+         do i = 1, nt
+            cmin = 1.0_wp
+            do k = 1, 4
+               call neighbour(i, j, k, nt, np, ii, jj)
+               cmin = min(cmin, dot_product(qd(:, i, j), qd(:, ii, jj)))
+               ! the diagonal neighbours
+               if (k <= 2 .and. ii /= i) then
+                  cmin = min(cmin, dot_product(qd(:, i, j), qd(:, ii, 1 + modulo(jj - 2, np))), &
+                             dot_product(qd(:, i, j), qd(:, ii, 1 + modulo(jj, np))))
+               end if
+            end do
+            alpha = acos(max(-1.0_wp, min(1.0_wp, cmin))) + margin
+            calpha = cos(alpha)
+            thq = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
+            phq = modulo(atan2(qd(2, i, j), qd(1, i, j)), two_pi)
+            call row_range(surf%grid%sphere%theta, thq - alpha, thq + alpha, i0, i1)
+            all_phi = thq - alpha <= 0.0_wp .or. thq + alpha >= pi
+            if (.not. all_phi) then
+               width = asin(min(1.0_wp, sin(alpha) / sin(thq))) + dphi
+               all_phi = width >= pi
+            end if
+            if (all_phi) then
+               j0 = 1
+               ncol = np
+            else
+               j0 = floor((phq - width) / dphi) + 1
+               ncol = floor((phq + width) / dphi) + 2 - j0
+            end if
+            xx = dot_product(surf%x(:, i, j), surf%x(:, i, j))
+            do jc = 1, ncol
+               ja = 1 + modulo(j0 + jc - 2, np)
+               do ia = i0, i1
+                  c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
+                  if (c < calpha) cycle
+                  du = dot_product(surf%u(:, ia, ja), surf%x(:, i, j))
+                  perp2 = xx - du * du
+                  if (perp2 < t2) then
+                     g = du + sqrt(t2 - perp2)
+                     if (g > lower(ia, ja)) then
+                        lower(ia, ja) = g
+                        start(:, ia, ja) = [i, j]
+                     end if
+                  else if (lower(ia, ja) == -huge(1.0_wp) .and. c > align(ia, ja)) then
+                     align(ia, ja) = c
+                     start(:, ia, ja) = [i, j]
+                  end if
+               end do
+            end do
+         end do
+      end do
+   end subroutine sampled_starts
+
+   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i); i1 < i0 when none.
+   pure subroutine row_range(theta, lo, hi, i0, i1)
+      real(wp), intent(in) :: theta(:), lo, hi
+      integer, intent(out) :: i0, i1
+      integer :: i
+      i0 = size(theta) + 1
+      i1 = 0
+      if (theta(1) <= theta(size(theta))) then
+         i0 = first_at_least(theta, lo)
+         i1 = first_at_least(theta, hi) - 1
+         if (i1 < size(theta)) then
+            if (theta(i1 + 1) <= hi) i1 = i1 + 1
+         end if
+      else
+         do i = 1, size(theta)
+            if (theta(i) >= lo .and. theta(i) <= hi) then
+               i0 = min(i0, i)
+               i1 = max(i1, i)
+            end if
+         end do
+      end if
+   end subroutine row_range
+
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none).
+   pure function first_at_least(theta, v) result(k)
+      real(wp), intent(in) :: theta(:), v
+      integer :: k, lo, hi, mid
+      lo = 1
+      hi = size(theta) + 1
+      do while (lo < hi)
+         mid = (lo + hi) / 2
+         if (theta(mid) >= v) then
+            hi = mid
+         else
+            lo = mid + 1
+         end if
+      end do
+      k = lo
+   end function first_at_least
+
+   !> Newton-Raphson for Eq 2.1 along u (theta-hat e1, phi-hat e2 span the plane perpendicular to
+   !> u) from (ts, ps); f0, when present, holds r and its derivatives at the start (the first step
+   !> then needs no evaluation). Finished by a second-order Taylor step once the Newton step is
+   !> below `finish_step`: rho = g_u(x + x_t dt + x_p dp + second-order terms). ok also requires
+   !> the local conditions (beta > 0 with rnode = r(u), u . n > 0, strict local minimum).
+   pure subroutine foot_newton(surf, u, e1, e2, t, rnode, ts, ps, rho, xf, ok, nev, f0)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode
+      real(wp), intent(inout) :: ts, ps
+      real(wp), intent(out) :: rho, xf(3)
+      logical, intent(out) :: ok
+      integer, intent(out) :: nev
+      real(wp), intent(in), optional :: f0(6)
+      real(wp) :: f(6), x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3), x2(3)
+      real(wp) :: nv(3), nt(3), np(3), nn, nh(3), q(3), qt(3), qp(3), sgn
+      real(wp) :: f1, f2, j11, j12, j21, j22, det, dt, dp, lam, h11, h12, h22, du, perp2
+      integer :: it
+
+      ok = .false.
+      rho = 0.0_wp
+      xf = 0.0_wp
+      nev = 0
+      do it = 1, 30
+         if (abs(sin(ts)) < 1.0e-6_wp) return
+         if (it == 1 .and. present(f0)) then
+            f = f0
+         else
+            call eval_surface(surf, ts, ps, f)
+            nev = nev + 1
+         end if
+         call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
+         sgn = sign(1.0_wp, sin(ts))
+         nv = sgn * cross3(xt, xp)
+         nn = norm2(nv)
+         nh = nv / nn
+         nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
+         np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
+         nt = (nt - nh * dot_product(nh, nt)) / nn
+         np = (np - nh * dot_product(nh, np)) / nn
+         q = x + t * nh
+         qt = xt + t * nt
+         qp = xp + t * np
+         f1 = dot_product(q, e1)
+         f2 = dot_product(q, e2)
+         j11 = dot_product(qt, e1)
+         j12 = dot_product(qp, e1)
+         j21 = dot_product(qt, e2)
+         j22 = dot_product(qp, e2)
+         det = j11 * j22 - j12 * j21
+         if (.not. abs(det) > tiny(det) * 1.0e10_wp) return
+         dt = -(j22 * f1 - j12 * f2) / det
+         dp = -(j11 * f2 - j21 * f1) / det
+         if (max(abs(dt), abs(dp)) <= finish_step) then
+            h11 = dot_product(xt, xt) - t * dot_product(nh, xtt)
+            h12 = dot_product(xt, xp) - t * dot_product(nh, xtp)
+            h22 = dot_product(xp, xp) - t * dot_product(nh, xpp)
+            if (.not. (h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. dot_product(nh, u) > 0.0_wp)) return
+            x2 = x + xt * dt + xp * dp + 0.5_wp * (xtt * dt * dt + 2.0_wp * xtp * dt * dp + xpp * dp * dp)
+            du = dot_product(u, x2)
+            perp2 = max(0.0_wp, dot_product(x2, x2) - du * du)
+            if (perp2 > t * t) return
+            rho = du + sqrt(t * t - perp2)
+            xf = x2
+            ts = ts + dt
+            ps = ps + dp
+            ok = rho > rnode
+            return
+         end if
+         lam = min(1.0_wp, 0.2_wp / max(abs(dt), abs(dp)))
+         ts = ts + lam * dt
+         ps = ps + lam * dp
+      end do
+   end subroutine foot_newton
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

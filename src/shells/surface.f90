@@ -13,8 +13,8 @@
 !>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_sh_expansion, only: sh_expansion_type
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals
+   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals, sh_synthesize
    implicit none
    private
 
@@ -35,6 +35,10 @@ module anm_shells_surface
       real(wp), allocatable :: n(:, :, :)
       !> Radii at the samples.
       real(wp), allocatable :: r(:, :)
+      !> r and its derivatives at the samples, f(:, i, j) as returned by `eval_surface`.
+      real(wp), allocatable :: f(:, :, :)
+      !> Unit directions of the grid nodes, u(3, ntheta, nphi).
+      real(wp), allocatable :: u(:, :, :)
       !> Largest distance between grid-adjacent samples (diagonals included).
       real(wp) :: hmax = 0.0_wp
       !> Largest sampled radius.
@@ -94,7 +98,71 @@ contains
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
+      allocate (surf%f(6, nt, np), surf%u(3, nt, np))
+      call grid_derivatives(surf%grid, shape, surf%f)
+      do j = 1, np
+         do i = 1, nt
+            surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
+         end do
+      end do
    end subroutine new_shell_surface
+
+   !> r and its first and second angular derivatives at every node of `grid` (the layout of
+   !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
+   !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
+   !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
+   pure subroutine grid_derivatives(grid, shape, f)
+      !> Grid with tables.
+      type(sh_grid_type), intent(in) :: grid
+      !> Expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
+      real(wp), intent(out) :: f(:, :, :)
+      type(sh_expansion_type) :: dphi, dphi2, lap
+      real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
+      integer :: n, m, nmax, nt, np, i
+      real(wp) :: st, ct
+
+      nmax = min(shape%nmax, grid%lmax)
+      nt = grid%sphere%ntheta
+      np = grid%sphere%nphi
+      allocate (a(0:nmax, 0:nmax), b(0:nmax, 0:nmax), w1(nt, np), w2(nt, np), w3(nt, np))
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = m * shape%b(n, m)
+            b(n, m) = -m * shape%a(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(dphi, a, b)
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = -real(m * m, wp) * shape%a(n, m)
+            b(n, m) = -real(m * m, wp) * shape%b(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(dphi2, a, b)
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = real(n * (n + 1), wp) * shape%a(n, m)
+            b(n, m) = real(n * (n + 1), wp) * shape%b(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(lap, a, b)
+      call sh_synthesize(grid, shape, w1, w2, w3, nused=nmax)
+      f(1, :, :) = w1
+      f(2, :, :) = w2
+      call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
+      f(3, :, :) = w1
+      f(5, :, :) = w2
+      call sh_synthesize(grid, dphi2, w1, nused=nmax)
+      f(6, :, :) = w1
+      call sh_synthesize(grid, lap, w3, nused=nmax)
+      do i = 1, nt
+         st = grid%sphere%sint(i)
+         ct = grid%sphere%x(i)
+         f(4, i, :) = -ct / st * f(2, i, :) - w3(i, :) - f(6, i, :) / (st * st)
+      end do
+   end subroutine grid_derivatives
 
    !> r and its derivatives at (theta, phi): f = [r, r_t, r_p, r_tt, r_tp, r_pp] (t = theta,
    !> p = phi, plain derivatives). sin(theta) may be negative (theta outside [0, pi]), which
