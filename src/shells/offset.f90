@@ -14,7 +14,8 @@
 !>     call offset_radius(surf, u, t, rt, used_fallback)
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_shells_surface, only: shell_surface_type, eval_surface, surface_frame, surface_distance, cross3
+   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_distance, &
+      & cross3
    implicit none
    private
 
@@ -31,6 +32,21 @@ module anm_shells_offset
    real(wp), parameter :: jump_factor = 2.0_wp
    !> Largest number of continuation passes over the grid.
    integer, parameter :: max_passes = 30
+   !> Largest number of Newton iterations per start.
+   integer, parameter :: max_newton = 30
+   !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
+   real(wp), parameter :: pole_sin = 1.0e-6_wp
+   !> Points per call of `eval_surface_many`.
+   integer, parameter :: eval_block = 256
+
+   !> States of a Newton iteration (enumerator).
+   type :: newton_state_enum
+      integer :: running = 0
+      integer :: converged = 1
+      integer :: failed = 2
+   end type newton_state_enum
+   !> Newton states.
+   type(newton_state_enum), parameter :: newton_state = newton_state_enum()
 
    !> How the directions of one grid were solved.
    type :: offset_counts_type
@@ -119,20 +135,7 @@ contains
       tol = bound_tol * (surf%rmax + t)
       jump2 = (jump_factor * surf%hmax)**2
       from_nb = .false.
-      do j = 1, np
-         do i = 1, nt
-            call node_frame(surf, i, j, u, e1, e2)
-            ts = surf%grid%sphere%theta(start(1, i, j))
-            ps = surf%grid%sphere%phi(start(2, i, j))
-            call foot_newton(surf, u, e1, e2, t, surf%r(i, j), ts, ps, rho, xf, ok, nev, &
-                             surf%f(:, start(1, i, j), start(2, i, j)))
-            counts%evaluations = counts%evaluations + nev
-            solved(i, j) = ok .and. rho >= lower(i, j) - tol
-            rt(i, j) = merge(rho, 0.0_wp, solved(i, j))
-            foot(:, i, j) = [ts, ps]
-            fx(:, i, j) = xf
-         end do
-      end do
+      call first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, counts%evaluations)
       ! continuation across creases and from solved neighbours
       dirty = .true.
       do pass = 1, max_passes
@@ -191,6 +194,73 @@ contains
       end do
    end subroutine offset_grid
 
+   !> Newton from every node's sampled start, all directions together: the first step from the
+   !> tabulated derivatives, then rounds of exact evaluations of the directions still running,
+   !> `eval_block` points per call of `eval_surface_many`.
+   pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: t, lower(:, :), tol
+      integer, intent(in) :: start(:, :, :)
+      real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
+      logical, intent(out) :: solved(:, :)
+      integer, intent(inout) :: nev
+      real(wp), allocatable :: ts(:), ps(:), f(:, :), bt(:), bp(:), bf(:, :)
+      integer, allocatable :: state(:), run(:)
+      real(wp) :: u(3), e1(3), e2(3), rho, xf(3)
+      integer :: nt, np, n, k, i, j, it, nrun, b0, b1
+
+      nt = size(rt, 1)
+      np = size(rt, 2)
+      n = nt * np
+      allocate (ts(n), ps(n), f(6, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block))
+      do j = 1, np
+         do i = 1, nt
+            k = i + (j - 1) * nt
+            ts(k) = surf%grid%sphere%theta(start(1, i, j))
+            ps(k) = surf%grid%sphere%phi(start(2, i, j))
+            f(:, k) = surf%f(:, start(1, i, j), start(2, i, j))
+            state(k) = newton_state%running
+         end do
+      end do
+      rt = 0.0_wp
+      fx = 0.0_wp
+      do it = 1, max_newton
+         nrun = 0
+         do j = 1, np
+            do i = 1, nt
+               k = i + (j - 1) * nt
+               if (state(k) /= newton_state%running) cycle
+               call node_frame(surf, i, j, u, e1, e2)
+               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), ts(k), ps(k), state(k), rho, xf)
+               if (state(k) == newton_state%running) then
+                  nrun = nrun + 1
+                  run(nrun) = k
+               else if (state(k) == newton_state%converged) then
+                  rt(i, j) = rho
+                  fx(:, i, j) = xf
+               end if
+            end do
+         end do
+         if (nrun == 0) exit
+         do b0 = 1, nrun, eval_block
+            b1 = min(nrun, b0 + eval_block - 1)
+            bt(1:b1 - b0 + 1) = ts(run(b0:b1))
+            bp(1:b1 - b0 + 1) = ps(run(b0:b1))
+            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1))
+            f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
+         end do
+         nev = nev + nrun
+      end do
+      do j = 1, np
+         do i = 1, nt
+            k = i + (j - 1) * nt
+            solved(i, j) = state(k) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
+            if (.not. solved(i, j)) rt(i, j) = 0.0_wp
+            foot(:, i, j) = [ts(k), ps(k)]
+         end do
+      end do
+   end subroutine first_pass
+
    !> Unit direction and the two perpendicular unit vectors (theta-hat, phi-hat) of node (i, j).
    pure subroutine node_frame(surf, i, j, u, e1, e2)
       type(shell_surface_type), intent(in) :: surf
@@ -231,87 +301,142 @@ contains
 
    !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
    !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
+   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by strips across the
+   !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
+   !> directions, so each cell's corners are tried on the direction nodes inside the (theta, phi)
+   !> box of those directions, widened by a quarter spacing. The node of every direction lies in
+   !> the image of the cell holding its true foot, whose corners are within one cell of it.
    pure subroutine sampled_starts(surf, t, lower, start)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t
       real(wp), intent(out) :: lower(:, :)
       integer, intent(out) :: start(:, :, :)
-      real(wp), allocatable :: qd(:, :, :), align(:, :)
-      real(wp) :: q(3), cmin, alpha, calpha, margin, thq, phq, width, du, perp2, g, xx, t2, c, dphi
-      integer :: nt, np, i, j, k, ii, jj, i0, i1, ia, ja, jc, ncol, j0
+      real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
+      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, du, perp2, g, t2, c, dphi
+      real(wp) :: pole(3), pole_dir(3, 2)
+      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, ci(4), cj(4), npc
       logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
       dphi = two_pi / np
-      allocate (qd(3, nt, np), align(nt, np))
+      allocate (qd(3, nt, np), qth(nt, np), qph(nt, np), align(nt, np), xx(nt, np))
       do j = 1, np
          do i = 1, nt
             q = surf%x(:, i, j) + t * surf%n(:, i, j)
-            qd(:, i, j) = q / norm2(q)
-         end do
-      end do
-      lower = -huge(1.0_wp)
-      align = -2.0_wp
-      do j = 1, np
-         do i = 1, nt
+            qd(:, i, j) = q / sqrt(dot_product(q, q))
+            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
+            qph(i, j) = atan2(qd(2, i, j), qd(1, i, j))
+            xx(i, j) = dot_product(surf%x(:, i, j), surf%x(:, i, j))
             start(:, i, j) = [i, j]
          end do
       end do
-      margin = 1.5_wp * pi / nt
+      do kc = 1, 2
+         ii = merge(1, nt, kc == 1)
+         pole = 0.0_wp
+         do j = 1, np
+            pole = pole + surf%x(:, ii, j) + t * surf%n(:, ii, j)
+         end do
+         pole_dir(:, kc) = pole / norm2(pole)
+      end do
+      lower = -huge(1.0_wp)
+      align = -2.0_wp
+      mth = 0.25_wp * pi / nt
+      mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
-         do i = 1, nt
-            cmin = 1.0_wp
-            do k = 1, 4
-               call neighbour(i, j, k, nt, np, ii, jj)
-               cmin = min(cmin, dot_product(qd(:, i, j), qd(:, ii, jj)))
-               ! the diagonal neighbours
-               if (k <= 2 .and. ii /= i) then
-                  cmin = min(cmin, dot_product(qd(:, i, j), qd(:, ii, 1 + modulo(jj - 2, np))), &
-                             dot_product(qd(:, i, j), qd(:, ii, 1 + modulo(jj, np))))
+         jj = 1 + modulo(j, np)
+         do i = 0, nt
+            ! corners of the cell between rows i and i + 1 (rows 0 and nt + 1: across the pole)
+            ci = [i, i, i + 1, i + 1]
+            cj = [j, jj, j, jj]
+            do kc = 1, 4
+               if (ci(kc) < 1 .or. ci(kc) > nt) then
+                  ci(kc) = merge(1, nt, ci(kc) < 1)
+                  cj(kc) = 1 + modulo(cj(kc) - 1 + np / 2, np)
                end if
             end do
-            alpha = acos(max(-1.0_wp, min(1.0_wp, cmin))) + margin
-            calpha = cos(alpha)
-            thq = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
-            phq = modulo(atan2(qd(2, i, j), qd(1, i, j)), two_pi)
-            call row_range(surf%grid%sphere%theta, thq - alpha, thq + alpha, i0, i1)
-            all_phi = thq - alpha <= 0.0_wp .or. thq + alpha >= pi
-            if (.not. all_phi) then
-               width = asin(min(1.0_wp, sin(alpha) / sin(thq))) + dphi
-               all_phi = width >= pi
+            thlo = pi
+            thhi = 0.0_wp
+            phlo = 0.0_wp
+            phhi = 0.0_wp
+            npc = 4
+            if (i == 0 .or. i == nt) then
+               ! a polar triangle: two corners of the first (last) ring and the offset direction of
+               ! the pole, approximated by the mean offset point of that ring
+               npc = 2
+               ci(1:2) = merge(1, nt, i == 0)
+               cj(1:2) = [j, jj]
+               pole = pole_dir(:, merge(1, 2, i == 0))
+               d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
+               if (min(d, pi - d) < 0.5_wp * minval(surf%grid%sphere%theta)) then
+                  ! at the pole itself (closer than any node): its azimuth is meaningless
+                  thlo = min(thlo, d)
+                  thhi = max(thhi, d)
+               else
+                  call widen(d, atan2(pole(2), pole(1)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+               end if
             end if
+            do kc = 1, npc
+               call widen(qth(ci(kc), cj(kc)), qph(ci(kc), cj(kc)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+            end do
+            all_phi = phhi - phlo > pi
+            if (all_phi) then
+               ! the patch holds a pole
+               if (qd(3, ci(1), cj(1)) > 0.0_wp) then
+                  thlo = 0.0_wp
+               else
+                  thhi = pi
+               end if
+            end if
+            call row_range(surf%grid%sphere%theta, thlo - mth, thhi + mth, i0, i1)
             if (all_phi) then
                j0 = 1
                ncol = np
             else
-               j0 = floor((phq - width) / dphi) + 1
-               ncol = floor((phq + width) / dphi) + 2 - j0
+               phlo = qph(ci(1), cj(1)) + phlo - mph
+               phhi = qph(ci(1), cj(1)) + phhi + mph
+               j0 = ceiling(phlo / dphi) + 1
+               ncol = floor(phhi / dphi) + 2 - j0
             end if
-            xx = dot_product(surf%x(:, i, j), surf%x(:, i, j))
             do jc = 1, ncol
                ja = 1 + modulo(j0 + jc - 2, np)
                do ia = i0, i1
-                  c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
-                  if (c < calpha) cycle
-                  du = dot_product(surf%u(:, ia, ja), surf%x(:, i, j))
-                  perp2 = xx - du * du
-                  if (perp2 < t2) then
-                     g = du + sqrt(t2 - perp2)
-                     if (g > lower(ia, ja)) then
-                        lower(ia, ja) = g
-                        start(:, ia, ja) = [i, j]
+                  do kc = 1, npc
+                     ii = ci(kc)
+                     du = dot_product(surf%u(:, ia, ja), surf%x(:, ii, cj(kc)))
+                     perp2 = xx(ii, cj(kc)) - du * du
+                     if (perp2 < t2) then
+                        g = du + sqrt(t2 - perp2)
+                        if (g > lower(ia, ja)) then
+                           lower(ia, ja) = g
+                           start(:, ia, ja) = [ii, cj(kc)]
+                        end if
+                     else if (lower(ia, ja) == -huge(1.0_wp)) then
+                        c = dot_product(surf%u(:, ia, ja), qd(:, ii, cj(kc)))
+                        if (c > align(ia, ja)) then
+                           align(ia, ja) = c
+                           start(:, ia, ja) = [ii, cj(kc)]
+                        end if
                      end if
-                  else if (lower(ia, ja) == -huge(1.0_wp) .and. c > align(ia, ja)) then
-                     align(ia, ja) = c
-                     start(:, ia, ja) = [i, j]
-                  end if
+                  end do
                end do
             end do
          end do
       end do
    end subroutine sampled_starts
+
+   !> Widen the box [thlo, thhi] x [phlo, phhi] (phi relative to ph0, unwrapped) to hold (th, ph).
+   pure subroutine widen(th, ph, ph0, thlo, thhi, phlo, phhi)
+      real(wp), intent(in) :: th, ph, ph0
+      real(wp), intent(inout) :: thlo, thhi, phlo, phhi
+      real(wp) :: d
+      thlo = min(thlo, th)
+      thhi = max(thhi, th)
+      d = modulo(ph - ph0 + pi, two_pi) - pi
+      phlo = min(phlo, d)
+      phhi = max(phhi, d)
+   end subroutine widen
 
    !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i); i1 < i0 when none.
    pure subroutine row_range(theta, lo, hi, i0, i1)
@@ -355,9 +480,7 @@ contains
 
    !> Newton-Raphson for Eq 2.1 along u (theta-hat e1, phi-hat e2 span the plane perpendicular to
    !> u) from (ts, ps); f0, when present, holds r and its derivatives at the start (the first step
-   !> then needs no evaluation). Finished by a second-order Taylor step once the Newton step is
-   !> below `finish_step`: rho = g_u(x + x_t dt + x_p dp + second-order terms). ok also requires
-   !> the local conditions (beta > 0 with rnode = r(u), u . n > 0, strict local minimum).
+   !> then needs no evaluation). See `newton_update` for the finish and the local conditions.
    pure subroutine foot_newton(surf, u, e1, e2, t, rnode, ts, ps, rho, xf, ok, nev, f0)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode
@@ -366,66 +489,89 @@ contains
       logical, intent(out) :: ok
       integer, intent(out) :: nev
       real(wp), intent(in), optional :: f0(6)
-      real(wp) :: f(6), x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3), x2(3)
-      real(wp) :: nv(3), nt(3), np(3), nn, nh(3), q(3), qt(3), qp(3), sgn
-      real(wp) :: f1, f2, j11, j12, j21, j22, det, dt, dp, lam, h11, h12, h22, du, perp2
-      integer :: it
+      real(wp) :: f(6)
+      integer :: it, state
 
       ok = .false.
       rho = 0.0_wp
       xf = 0.0_wp
       nev = 0
-      do it = 1, 30
-         if (abs(sin(ts)) < 1.0e-6_wp) return
-         if (it == 1 .and. present(f0)) then
-            f = f0
-         else
-            call eval_surface(surf, ts, ps, f)
-            nev = nev + 1
-         end if
-         call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
-         sgn = sign(1.0_wp, sin(ts))
-         nv = sgn * cross3(xt, xp)
-         nn = norm2(nv)
-         nh = nv / nn
-         nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
-         np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
-         nt = (nt - nh * dot_product(nh, nt)) / nn
-         np = (np - nh * dot_product(nh, np)) / nn
-         q = x + t * nh
-         qt = xt + t * nt
-         qp = xp + t * np
-         f1 = dot_product(q, e1)
-         f2 = dot_product(q, e2)
-         j11 = dot_product(qt, e1)
-         j12 = dot_product(qp, e1)
-         j21 = dot_product(qt, e2)
-         j22 = dot_product(qp, e2)
-         det = j11 * j22 - j12 * j21
-         if (.not. abs(det) > tiny(det) * 1.0e10_wp) return
-         dt = -(j22 * f1 - j12 * f2) / det
-         dp = -(j11 * f2 - j21 * f1) / det
-         if (max(abs(dt), abs(dp)) <= finish_step) then
-            h11 = dot_product(xt, xt) - t * dot_product(nh, xtt)
-            h12 = dot_product(xt, xp) - t * dot_product(nh, xtp)
-            h22 = dot_product(xp, xp) - t * dot_product(nh, xpp)
-            if (.not. (h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. dot_product(nh, u) > 0.0_wp)) return
-            x2 = x + xt * dt + xp * dp + 0.5_wp * (xtt * dt * dt + 2.0_wp * xtp * dt * dp + xpp * dp * dp)
-            du = dot_product(u, x2)
-            perp2 = max(0.0_wp, dot_product(x2, x2) - du * du)
-            if (perp2 > t * t) return
-            rho = du + sqrt(t * t - perp2)
-            xf = x2
-            ts = ts + dt
-            ps = ps + dp
-            ok = rho > rnode
-            return
-         end if
-         lam = min(1.0_wp, 0.2_wp / max(abs(dt), abs(dp)))
-         ts = ts + lam * dt
-         ps = ps + lam * dp
+      if (present(f0)) then
+         f = f0
+      else
+         if (abs(sin(ts)) < pole_sin) return
+         call eval_surface(surf, ts, ps, f)
+         nev = 1
+      end if
+      do it = 1, max_newton
+         call newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+         if (state /= newton_state%running) exit
+         call eval_surface(surf, ts, ps, f)
+         nev = nev + 1
       end do
+      ok = state == newton_state%converged
    end subroutine foot_newton
+
+   !> One Newton step for Eq 2.1 at (ts, ps) with f = r and its derivatives there. Once the step is
+   !> below `finish_step` the root is finished by a second-order Taylor step, rho = g_u(x + x_t dt +
+   !> x_p dp + second-order terms), and state = converged if the local conditions hold (beta > 0 with
+   !> rnode = r(u), u . n > 0, strict local minimum of the distance: 1 - t kappa_i > 0), else failed.
+   !> Otherwise (ts, ps) takes the (damped) step and state = running (failed near the poles).
+   pure subroutine newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6)
+      real(wp), intent(inout) :: ts, ps
+      integer, intent(out) :: state
+      real(wp), intent(out) :: rho, xf(3)
+      real(wp) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3), x2(3)
+      real(wp) :: nv(3), nt(3), np(3), nn, nh(3), q(3), qt(3), qp(3), sgn
+      real(wp) :: f1, f2, j11, j12, j21, j22, det, dt, dp, lam, h11, h12, h22, du, perp2
+
+      state = newton_state%failed
+      rho = 0.0_wp
+      xf = 0.0_wp
+      call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
+      sgn = sign(1.0_wp, sin(ts))
+      nv = sgn * cross3(xt, xp)
+      nn = sqrt(dot_product(nv, nv))
+      nh = nv / nn
+      nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
+      np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
+      nt = (nt - nh * dot_product(nh, nt)) / nn
+      np = (np - nh * dot_product(nh, np)) / nn
+      q = x + t * nh
+      qt = xt + t * nt
+      qp = xp + t * np
+      f1 = dot_product(q, e1)
+      f2 = dot_product(q, e2)
+      j11 = dot_product(qt, e1)
+      j12 = dot_product(qp, e1)
+      j21 = dot_product(qt, e2)
+      j22 = dot_product(qp, e2)
+      det = j11 * j22 - j12 * j21
+      if (.not. abs(det) > tiny(det) * 1.0e10_wp) return
+      dt = -(j22 * f1 - j12 * f2) / det
+      dp = -(j11 * f2 - j21 * f1) / det
+      if (max(abs(dt), abs(dp)) <= finish_step) then
+         h11 = dot_product(xt, xt) - t * dot_product(nh, xtt)
+         h12 = dot_product(xt, xp) - t * dot_product(nh, xtp)
+         h22 = dot_product(xp, xp) - t * dot_product(nh, xpp)
+         if (.not. (h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. dot_product(nh, u) > 0.0_wp)) return
+         x2 = x + xt * dt + xp * dp + 0.5_wp * (xtt * dt * dt + 2.0_wp * xtp * dt * dp + xpp * dp * dp)
+         du = dot_product(u, x2)
+         perp2 = max(0.0_wp, dot_product(x2, x2) - du * du)
+         if (perp2 > t * t) return
+         rho = du + sqrt(t * t - perp2)
+         xf = x2
+         ts = ts + dt
+         ps = ps + dp
+         if (rho > rnode) state = newton_state%converged
+         return
+      end if
+      lam = min(1.0_wp, 0.2_wp / max(abs(dt), abs(dp)))
+      ts = ts + lam * dt
+      ps = ps + lam * dp
+      if (abs(sin(ts)) >= pole_sin) state = newton_state%running
+   end subroutine newton_update
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

@@ -18,8 +18,8 @@ module anm_shells_surface
    implicit none
    private
 
-   public :: shell_surface_type, new_shell_surface, eval_surface, surface_frame, surface_distance, &
-      & closest_point, cross3
+   public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
+      & surface_distance, closest_point, cross3
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -237,6 +237,83 @@ contains
          f(6) = f(6) - msq * (a0 * cm + b0 * sm)
       end do
    end subroutine eval_surface
+
+   !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
+   !> with the points innermost (vectorised), for blocks of a few hundred points.
+   pure subroutine eval_surface_many(surf, theta, phi, f)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Polar angles and azimuths (|sin(theta)| not tiny).
+      real(wp), intent(in) :: theta(:), phi(:)
+      !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
+      real(wp), intent(out) :: f(:, :)
+      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+      real(wp), dimension(size(theta)) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
+                                          a0, b0, a1, b1, ann, bnn
+      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq
+      integer :: m, n, k0, nmax
+
+      x = cos(theta)
+      s = sin(theta)
+      cp = cos(phi)
+      sp = sin(phi)
+      inv_s = 1.0_wp / s
+      cots = x * inv_s
+      nmax = surf%shape%nmax
+      pmm = inv_sqrt_4pi
+      cm = 1.0_wp
+      sm = 0.0_wp
+      f = 0.0_wp
+      do m = 0, nmax
+         if (m > 0) then
+            pmm = -surf%shape%table%sect(m) * s * pmm
+            cnew = cm * cp - sm * sp
+            sm = sm * cp + cm * sp
+            cm = cnew
+         end if
+         k0 = surf%shape%table%idx(m)
+         rn = real(m, wp)
+         nn1 = rn * (rn + 1.0_wp)
+         an = surf%shape%a(m, m)
+         bn = surf%shape%b(m, m)
+         p0 = 0.0_wp
+         p1 = pmm
+         d1 = rn * x * p1 * inv_s
+         a0 = an * p1
+         b0 = bn * p1
+         a1 = an * d1
+         b1 = bn * d1
+         ann = an * nn1 * p1
+         bnn = bn * nn1 * p1
+         do n = m + 1, nmax
+            rn = real(n, wp)
+            nn1 = rn * (rn + 1.0_wp)
+            ca = surf%shape%table%ca(k0 + n - m)
+            cb = merge(0.0_wp, surf%shape%table%cb(k0 + n - m), n == m + 1)
+            en = surf%enm(k0 + n - m)
+            an = surf%shape%a(n, m)
+            bn = surf%shape%b(n, m)
+            p2 = ca * x * p1 - cb * p0
+            p0 = p1
+            p1 = p2
+            d1 = (rn * x * p1 - en * p0) * inv_s
+            a0 = a0 + an * p1
+            b0 = b0 + bn * p1
+            a1 = a1 + an * d1
+            b1 = b1 + bn * d1
+            ann = ann + (an * nn1) * p1
+            bnn = bnn + (bn * nn1) * p1
+         end do
+         msq = real(m * m, wp)
+         f(1, :) = f(1, :) + a0 * cm + b0 * sm
+         f(2, :) = f(2, :) + a1 * cm + b1 * sm
+         f(3, :) = f(3, :) + m * (b0 * cm - a0 * sm)
+         f(4, :) = f(4, :) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm &
+                   + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
+         f(5, :) = f(5, :) + m * (b1 * cm - a1 * sm)
+         f(6, :) = f(6, :) - msq * (a0 * cm + b0 * sm)
+      end do
+   end subroutine eval_surface_many
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
    !> x, x_t, x_p, x_tt, x_tp, x_pp (Cartesian, body frame).
