@@ -31,7 +31,8 @@ program bench_shells
       error stop 1
    end if
    write (output_unit, '(a)') "# shell construction, 1 thread, degree 14, 120 x 240 grid; best of 3"
-   write (output_unit, '(a)') "# shape                          t/L      ms  newton continued fallback evals order   residual/t"
+   write (output_unit, '(a)') "# shape                          t/L      ms  newton continued fallback  evals order lifts"// &
+      "   inside/t  outside/t"
    do k = 1, min(nshape, size(set%shapes))
       s = sh_truncate(set%shapes(k), degree)
       call compute_geometry(s, geom)
@@ -46,8 +47,9 @@ program bench_shells
                error stop 1
             end if
          end do
-         write (output_unit, '(a30,f7.3,f9.2,i8,i10,i9,i7,i6,es12.3)') set%names(k)%s, fractions(f), 1.0e3_wp * best, &
-            rep%newton, rep%continued, rep%fallback, rep%evaluations, rep%order, rep%fit_residual / rep%thickness
+         write (output_unit, '(a30,f7.3,f9.2,i8,i10,i9,i7,i6,i6,2es11.3)') set%names(k)%s, fractions(f), 1.0e3_wp * best, &
+            rep%newton, rep%continued, rep%fallback, rep%evaluations, rep%order, rep%lifts, rep%fit_inside / rep%thickness, &
+            rep%fit_outside / rep%thickness
       end do
    end do
 

@@ -407,9 +407,10 @@ contains
                      du = dot_product(surf%u(:, ia, ja), surf%x(:, ii, cj(kc)))
                      perp2 = xx(ii, cj(kc)) - du * du
                      if (perp2 < t2) then
-                        g = du + sqrt(t2 - perp2)
-                        if (g > lower(ia, ja)) then
-                           lower(ia, ja) = g
+                        ! g = du + sqrt(t2 - perp2) > lower, without the square root unless it is
+                        g = lower(ia, ja) - du
+                        if (g < 0.0_wp .or. t2 - perp2 > g * g) then
+                           lower(ia, ja) = du + sqrt(t2 - perp2)
                            start(:, ia, ja) = [ii, cj(kc)]
                         end if
                      else if (lower(ia, ja) == -huge(1.0_wp)) then

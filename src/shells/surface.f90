@@ -83,18 +83,19 @@ contains
       do j = 1, np
          jn = 1 + mod(j, np)
          do i = 1, nt
-            surf%r(i, j) = norm2(surf%x(:, i, j))
-            h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i, jn)))
+            surf%r(i, j) = sqrt(dot_product(surf%x(:, i, j), surf%x(:, i, j)))
+            h = max(h, dist2(surf%x(:, i, j), surf%x(:, i, jn)))
             if (i < nt) then
-               h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i + 1, j)), norm2(surf%x(:, i, j) - surf%x(:, i + 1, jn)), &
-                       norm2(surf%x(:, i, jn) - surf%x(:, i + 1, j)))
+               h = max(h, dist2(surf%x(:, i, j), surf%x(:, i + 1, j)), dist2(surf%x(:, i, j), surf%x(:, i + 1, jn)), &
+                       dist2(surf%x(:, i, jn), surf%x(:, i + 1, j)))
             end if
          end do
       end do
       ! the polar caps: samples of the first and last rings are joined across the pole
       do j = 1, np / 2
-         h = max(h, norm2(surf%x(:, 1, j) - surf%x(:, 1, j + np / 2)), norm2(surf%x(:, nt, j) - surf%x(:, nt, j + np / 2)))
+         h = max(h, dist2(surf%x(:, 1, j), surf%x(:, 1, j + np / 2)), dist2(surf%x(:, nt, j), surf%x(:, nt, j + np / 2)))
       end do
+      h = sqrt(h)
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
@@ -163,6 +164,13 @@ contains
          f(4, i, :) = -ct / st * f(2, i, :) - w3(i, :) - f(6, i, :) / (st * st)
       end do
    end subroutine grid_derivatives
+
+   !> Squared distance between two points.
+   pure function dist2(a, b) result(d)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: d
+      d = (a(1) - b(1))**2 + (a(2) - b(2))**2 + (a(3) - b(3))**2
+   end function dist2
 
    !> r and its derivatives at (theta, phi): f = [r, r_t, r_p, r_tt, r_tp, r_pp] (t = theta,
    !> p = phi, plain derivatives). sin(theta) may be negative (theta outside [0, pi]), which
