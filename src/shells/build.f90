@@ -1,10 +1,12 @@
 !> Uniform-thickness shells (thesis sections 2.3, 2.5.2, 3.2) of any thickness.
 !>
 !> The outer surface of a shell of thickness t is R_t(u) = max{rho : dist(rho u, particle) <= t}
-!> along every direction u of a Gauss grid (`anm_shells_offset`: the thesis' Newton construction,
-!> validated against that definition, with the definition itself as fallback), fitted by
-!> quadrature with an SH expansion of the smallest order whose residual at the nodes is at most
-!> fit_tol * t (searched up to order_cap). The result is a star-shaped body about the same centre.
+!> along every direction u of a Gauss grid (`anm_shells_offset`: the thesis' Newton construction
+!> from sampled starts, checked against sampled lower bounds, continuation across creases, the
+!> definition itself as fallback), fitted by quadrature with an SH expansion of the smallest order
+!> whose residual at the nodes is at most fit_tol * t (searched up to order_cap) and, by default,
+!> lifted where it lies inside R_t until it lies inside by at most 0.02 t at every node. The
+!> result is a star-shaped body about the same centre. Volumes are quadratures of R_t itself.
 !>
 !> Usage:
 !>     type(sh_expansion_type) :: outer
@@ -33,11 +35,15 @@ module anm_shells_build
    !> correction lifts the fit until it holds, build_shell fails if it cannot. The fitted body thus
    !> contains the true dilated body up to 0.02 t at the nodes (the safe side for exclusion).
    real(wp), parameter :: inside_tol = 0.02_wp
-   !> Largest accepted height (relative to t) of the fitted surface outside R_t at the nodes. The
-   !> dilated body has creases (concave kinks) in concave regions; the smooth fit rounds them off
-   !> outwards. Measured up to 1.7 t on synthetic shapes at t = 0.5 % of L (narrow crease valleys),
-   !> up to 0.5 t on MA111-7-coarse; beyond 3 t the representation is refused.
+   !> Largest accepted distance of the fitted surface from R_t at the nodes is the larger of
+   !> max_outside t and max_outside_radius rmax. With the lift the distance is outward (the
+   !> dilated body has creases, concave kinks, in concave regions, and the smooth fit fills their
+   !> valleys): measured up to 1.7 t on synthetic shapes at degree 14-20 and t = 0.5 % of L, up to
+   !> 0.75 t on MA111-7-coarse at degree 14, and up to 6 t (0.6 % of L) at degree 30 and
+   !> t = 0.1 % of L, where the crevices of the particle are sharper than t.
    real(wp), parameter :: max_outside = 3.0_wp
+   !> See max_outside: the bound relative to the largest particle radius.
+   real(wp), parameter :: max_outside_radius = 0.02_wp
    !> Largest number of lifting iterations of the one-sided correction.
    integer, parameter :: max_lifts = 40
    !> Relaxation factor of a lifting iteration.
@@ -182,6 +188,7 @@ contains
       type(shell_report_type), intent(out) :: report
       type(error_type), allocatable, intent(out) :: error
       real(wp), allocatable :: rt(:, :)
+      real(wp) :: bound
       integer :: nt
 
       nt = surf%grid%sphere%ntheta
@@ -200,10 +207,12 @@ contains
                           " t); use a finer grid or higher order")
          return
       end if
-      if (report%fit_residual > max_outside * thickness) then
+      bound = max(max_outside * thickness, max_outside_radius * surf%rmax)
+      if (report%fit_residual > bound) then
          call fatal_error(error, "shell of "//name//" (t = "//to_string(thickness)//"): fitted surface lies "// &
                           to_string(report%fit_residual)//" from R_t at order "//to_string(report%order)// &
-                          " (bound "//to_string(max_outside)//" t); use a finer grid or higher order")
+                          " (bound "//to_string(bound)//" = max("//to_string(max_outside)//" t, "// &
+                          to_string(max_outside_radius)//" rmax)); use a finer grid or higher order")
          return
       end if
    end subroutine shell_on_surface

@@ -1,17 +1,23 @@
-!> The outer radius R_t(u) of a shell of thickness t along one direction u.
+!> The outer radius R_t(u) of a shell of thickness t along the directions u of a grid
+!> (`offset_grid`, the production path) or along one direction (`offset_radius`, the reference).
 !>
-!> First the thesis' construction (Eq 2.1): find the surface point x(theta', phi') whose normal
-!> offset x + t n lies on the ray, r(theta', phi') + t n(theta', phi') = (r(theta, phi) + beta) u,
-!> by Newton-Raphson in (theta', phi') from the sample whose offset point is best aligned with u.
-!> A Newton root is accepted only if it satisfies the distance definition of the shell: beta > 0,
-!> u . n > 0, the offset point is a local minimum of the distance (positive definite Hessian of
-!> |y - x|^2), and no other part of the surface is closer than t (checked with
-!> `surface_distance`). Otherwise the direction falls back on the definition itself,
-!> R_t(u) = max{rho : dist(rho u, particle) <= t}, found by safeguarded Newton/bisection on rho
-!> (the set is an interval [0, R_t] because the dilated body is star-shaped about the centre).
+!> R_t(u) = max{rho : dist(rho u, particle) <= t} = max over surface points x of
+!> g_u(x) = u . x + sqrt(t^2 - |x - (u . x) u|^2): the stationary points of g_u are exactly the
+!> roots of the thesis' Eq 2.1, r(theta', phi') + t n(theta', phi') = (r(theta, phi) + beta) u, so
+!> R_t is the largest valid Newton root, and every surface sample gives a lower bound.
+!>
+!> `offset_grid`: sampled lower bounds and starts (cells of surface samples spread over the
+!> directions their offset points cover), Newton from the best sample (first step from tabulated
+!> derivatives, then exact evaluations in batches), acceptance by the local conditions and the
+!> sampled bound, continuation from neighbours' feet across creases, the definition as fallback.
+!>
+!> `offset_radius`: Newton from the sample best aligned with u, validated by a distance search
+!> over the surface (`surface_distance`), else the definition itself by safeguarded
+!> Newton/bisection on rho (slow; used by the tests as the reference).
 !>
 !> Usage:
-!>     call offset_radius(surf, u, t, rt, used_fallback)
+!>     call offset_grid(surf, t, rt, counts)               ! R_t at every node of surf%grid
+!>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_distance, &
