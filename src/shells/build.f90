@@ -18,7 +18,7 @@ module anm_shells_build
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_analyze, sh_synthesize
+   use anm_sh_grid, only: sh_synthesize
    use anm_shells_surface, only: shell_surface_type, new_shell_surface
    use anm_shells_offset, only: offset_grid, offset_counts_type
    implicit none
@@ -331,7 +331,7 @@ contains
       target = default_fit_tol * t
       if (present(fit_tol)) target = fit_tol * t
       allocate (a(0:cap, 0:cap), b(0:cap, 0:cap), fit(size(rt, 1), size(rt, 2)))
-      call sh_analyze(surf%grid, rt, cap, a, b)
+      call grid_analyze(surf, rt, cap, a, b)
       call new_sh_expansion_real(outer, a, b)
       best = cap
       if (search) then
@@ -359,9 +359,9 @@ contains
       allocate (da(0:best, 0:best), db(0:best, 0:best), deficit(size(rt, 1), size(rt, 2)))
       report%lifts = 0
       do while (lift .and. maxval(rt - fit) > inside_tol * t .and. report%lifts < max_lifts)
-         ! only the nodes that violate the bound, lifted to half of it (sparse, little overshoot)
+         ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
-         call sparse_analyze(surf, deficit, best, da, db)
+         call grid_analyze(surf, deficit, best, da, db)
          a(0:best, 0:best) = a(0:best, 0:best) + lift_factor * da
          b(0:best, 0:best) = b(0:best, 0:best) + lift_factor * db
          call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
@@ -381,40 +381,31 @@ contains
       report%layer_fraction = report%shell_fraction
    end subroutine fit_outer
 
-   !> `sh_analyze` of a function that vanishes at most nodes (the deficit of a lift): the
-   !> quadrature sums run over the nonzero nodes only.
-   pure subroutine sparse_analyze(surf, f, nmax, a, b)
+   !> `sh_analyze` with both stages as matrix products (the azimuthal sums over whole rows of
+   !> the grid, then the Legendre sums): same coefficients, a few times faster.
+   pure subroutine grid_analyze(surf, f, nmax, a, b)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: f(:, :)
       integer, intent(in) :: nmax
       real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp) :: wf, c, sn
-      integer :: i, j, m, n, k0, lm
+      real(wp), allocatable :: fc(:, :), fs(:, :)
+      integer :: i, m, k0, lm
 
+      lm = surf%grid%lmax
+      fc = matmul(f, transpose(surf%grid%trig(1:nmax + 1, :)))
       a = 0.0_wp
       b = 0.0_wp
-      lm = surf%grid%lmax
-      do j = 1, size(f, 2)
-         do i = 1, size(f, 1)
-            if (f(i, j) == 0.0_wp) cycle
-            wf = f(i, j) * surf%grid%sphere%weight(i)
-            do m = 0, nmax
-               k0 = surf%grid%idx(m)
-               if (m == 0) then
-                  c = wf
-                  sn = 0.0_wp
-               else
-                  c = 2.0_wp * wf * surf%grid%trig(m + 1, j)
-                  sn = 2.0_wp * wf * surf%grid%trig(lm + 1 + m, j)
-               end if
-               do n = m, nmax
-                  a(n, m) = a(n, m) + c * surf%grid%plm(k0 + n - m, i)
-                  b(n, m) = b(n, m) + sn * surf%grid%plm(k0 + n - m, i)
-               end do
-            end do
-         end do
+      if (nmax > 0) fs = matmul(f, transpose(surf%grid%trig(lm + 2:lm + 1 + nmax, :)))
+      do i = 1, size(f, 1)
+         fc(i, :) = fc(i, :) * surf%grid%sphere%weight(i)
+         if (nmax > 0) fs(i, :) = fs(i, :) * surf%grid%sphere%weight(i)
       end do
-   end subroutine sparse_analyze
+      do m = 0, nmax
+         k0 = surf%grid%idx(m)
+         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fc(:, m + 1))
+         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fs(:, m))
+      end do
+   end subroutine grid_analyze
 
    !> Volume inside the radii r(i, j) given on the grid nodes: sum of w r^3 / 3.
    pure function grid_volume(surf, r) result(vol)

@@ -275,8 +275,9 @@ contains
       real(wp) :: st, ct, cp, sp
       st = surf%grid%sphere%sint(i)
       ct = surf%grid%sphere%x(i)
-      cp = cos(surf%grid%sphere%phi(j))
-      sp = sin(surf%grid%sphere%phi(j))
+      ! cos(phi_j) and sin(phi_j) from the grid's trigonometric table
+      cp = surf%grid%trig(2, j)
+      sp = surf%grid%trig(surf%grid%lmax + 2, j)
       u = [st * cp, st * sp, ct]
       e1 = [ct * cp, ct * sp, -st]
       e2 = [-sp, cp, 0.0_wp]
