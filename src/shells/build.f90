@@ -361,7 +361,13 @@ contains
       do while (lift .and. maxval(rt - fit) > inside_tol * t .and. report%lifts < max_lifts)
          ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
-         call grid_analyze(surf, deficit, best, da, db)
+         ! sums over the violating nodes only when they are few (cost per node ~ order^2 against
+         ! ~ 2 nphi order per grid row for the dense transform)
+         if (count(deficit > 0.0_wp) * (best + 1) < 2 * size(rt)) then
+            call sparse_analyze(surf, deficit, best, da, db)
+         else
+            call grid_analyze(surf, deficit, best, da, db)
+         end if
          a(0:best, 0:best) = a(0:best, 0:best) + lift_factor * da
          b(0:best, 0:best) = b(0:best, 0:best) + lift_factor * db
          call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
@@ -406,6 +412,41 @@ contains
          if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fs(:, m))
       end do
    end subroutine grid_analyze
+
+   !> `grid_analyze` of a function that vanishes at most nodes (the deficit of a lift): the
+   !> quadrature sums run over the nonzero nodes only.
+   pure subroutine sparse_analyze(surf, f, nmax, a, b)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: f(:, :)
+      integer, intent(in) :: nmax
+      real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
+      real(wp) :: wf, c, sn
+      integer :: i, j, m, n, k0, lm
+
+      a = 0.0_wp
+      b = 0.0_wp
+      lm = surf%grid%lmax
+      do j = 1, size(f, 2)
+         do i = 1, size(f, 1)
+            if (f(i, j) == 0.0_wp) cycle
+            wf = f(i, j) * surf%grid%sphere%weight(i)
+            do m = 0, nmax
+               k0 = surf%grid%idx(m)
+               if (m == 0) then
+                  c = wf
+                  sn = 0.0_wp
+               else
+                  c = 2.0_wp * wf * surf%grid%trig(m + 1, j)
+                  sn = 2.0_wp * wf * surf%grid%trig(lm + 1 + m, j)
+               end if
+               do n = m, nmax
+                  a(n, m) = a(n, m) + c * surf%grid%plm(k0 + n - m, i)
+                  b(n, m) = b(n, m) + sn * surf%grid%plm(k0 + n - m, i)
+               end do
+            end do
+         end do
+      end do
+   end subroutine sparse_analyze
 
    !> Volume inside the radii r(i, j) given on the grid nodes: sum of w r^3 / 3.
    pure function grid_volume(surf, r) result(vol)
