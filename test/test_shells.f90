@@ -17,7 +17,8 @@ module test_shells
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_shells_surface, only: shell_surface_type, new_shell_surface
-   use anm_shells_offset, only: offset_radius
+   use anm_shells_offset, only: offset_radius, offset_grid, offset_counts_type
+   use anm_shapes_synthetic, only: synthetic_params_type, make_synthetic_shape
    use anm_shells_build, only: shell_report_type, build_shell, build_layers
    use anm_shells_thickness, only: thickness_spec_type, thickness_unit, thickness_in_shape_units
    use anm_testing, only: unittest_type, new_unittest, check, shapes_dir
@@ -29,6 +30,11 @@ module test_shells
    integer, parameter :: test_degree = 14
    !> Polar nodes of the direction grid in the real-shape tests (nphi = 2 ntheta).
    integer, parameter :: test_ntheta = 48
+   !> Documented bound (docs/shells.md) on the depth of the lifted fitted surface inside R_t at
+   !> the grid nodes, relative to t.
+   real(wp), parameter :: node_inside_bound = 0.02_wp
+   !> Documented bound on that depth at arbitrary directions (between the nodes), relative to t.
+   real(wp), parameter :: inside_bound = 0.1_wp
 
 contains
 
@@ -42,6 +48,9 @@ contains
               new_unittest("real shapes: one shell of 5t equals five nested shells of t", test_five_layers), &
               new_unittest("real shapes: thin shell volume is S t", test_thin_shell), &
               new_unittest("MA111-7-coarse: shells of 0.1, 2, 5 and 10 % of L", test_all_coarse), &
+              new_unittest("grid R_t agrees with the distance-validated reference", test_grid_reference), &
+              new_unittest("synthetic shapes: shells of 0.5, 2, 5 and 10 % of L", test_synthetic), &
+              new_unittest("fitted surface lies inside R_t by at most its bound", test_fit_bound), &
               new_unittest("layers: volumes add up to the outermost shell", test_layers), &
               new_unittest("thickness in mm and as a fraction of length", test_thickness_spec), &
               new_unittest("zero thickness is refused", test_zero_thickness, should_fail=.true.), &
@@ -274,10 +283,8 @@ contains
       end do
    end subroutine test_brute_force
 
-   !> Nested shells are built on the fitted (order 28) outer surface of the previous one. Only the
-   !> first particle is used: on rougher ones (00003) the fitted surface's ripples near the
-   !> creases of the dilated body make the next fit exceed the residual limit, and build_shell
-   !> then reports an error (see docs/shells.md).
+   !> Nested shells are built on the fitted (order 28) outer surface of the previous one; three
+   !> particles (00002, 00003, 00004).
    subroutine test_five_layers(error)
       type(error_type), allocatable, intent(out) :: error
       type(sh_expansion_type), allocatable :: shapes(:)
@@ -288,17 +295,17 @@ contains
       real(wp) :: t, v0
       integer :: k, l
 
-      call coarse_shapes(1, shapes, names, geom, error)
+      call coarse_shapes(3, shapes, names, geom, error)
       if (allocated(error)) return
       do k = 1, size(shapes)
          t = 0.01_wp * geom(k)%length
          call build_shell(shapes(k), 5.0_wp * t, outer, rep5, error, label=trim(names(k)), ntheta=64, &
-                          order=2 * test_degree)
+                          order=2 * test_degree, conservative=.false.)
          if (allocated(error)) return
          inner = shapes(k)
          do l = 1, 5
             call build_shell(inner, t, outer, rep, error, label=trim(names(k))//" nested "//to_string(l), &
-                             ntheta=64, order=2 * test_degree)
+                             ntheta=64, order=2 * test_degree, conservative=.false.)
             if (allocated(error)) return
             if (l == 1) v0 = rep%particle_volume
             inner = outer
@@ -384,6 +391,144 @@ contains
          end do
       end do
    end subroutine test_all_coarse
+
+   !> R_t at the nodes (sampled start, Newton, continuation) against `offset_radius`, whose Newton
+   !> roots are validated by a distance search over the surface and which falls back on the
+   !> definition itself: every node of every third meridian, three particles, three thicknesses.
+   subroutine test_grid_reference(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(sh_expansion_type), allocatable :: shapes(:)
+      character(len=64), allocatable :: names(:)
+      type(shape_geometry_type), allocatable :: geom(:)
+      type(shell_surface_type) :: surf
+      type(offset_counts_type) :: counts
+      real(wp), parameter :: fracs(3) = [0.001_wp, 0.02_wp, 0.1_wp]
+      real(wp), allocatable :: rt(:, :)
+      real(wp) :: t, ref, worst
+      integer :: k, f, i, j, nfar, ntot
+      logical :: fb
+
+      call coarse_shapes(3, shapes, names, geom, error)
+      if (allocated(error)) return
+      allocate (rt(test_ntheta, 2 * test_ntheta))
+      do k = 1, size(shapes)
+         call new_shell_surface(surf, shapes(k), test_ntheta, 2 * test_degree)
+         do f = 1, size(fracs)
+            t = fracs(f) * geom(k)%length
+            call offset_grid(surf, t, rt, counts)
+            worst = 0.0_wp
+            nfar = 0
+            ntot = 0
+            do j = 1, 2 * test_ntheta, 3
+               do i = 1, test_ntheta
+                  call offset_radius(surf, surf%grid%sphere%theta(i), surf%grid%sphere%phi(j), t, ref, fb)
+                  worst = max(worst, abs(rt(i, j) - ref) / t)
+                  if (abs(rt(i, j) - ref) > 1.0e-6_wp * t) nfar = nfar + 1
+                  ntot = ntot + 1
+               end do
+            end do
+            write (output_unit, '(4x,a,a,f6.3,a,es9.2,a,i0,a,i0,a,i0,a,i0)') trim(names(k)), " t/L", fracs(f), &
+               ": max |R - ref|/t", worst, ", nodes off by > 1e-6 t: ", nfar, " of ", ntot, &
+               "; continued ", counts%continued, ", fallback ", counts%fallback
+            call check(error, worst, 0.0_wp, trim(names(k))//" grid vs reference", thr=1.0e-2_wp)
+            if (allocated(error)) return
+            call check(error, real(nfar, wp) / ntot, 0.0_wp, trim(names(k))//" nodes off the reference", thr=1.0e-2_wp)
+            if (allocated(error)) return
+         end do
+      end do
+   end subroutine test_grid_reference
+
+   !> Synthetic shapes (generator defaults, degrees 14 and 20, three shapes each) get shells of
+   !> 0.5, 2, 5 and 10 % of their length on the default 120 x 240 grid, with the lifted fit
+   !> inside R_t by at most the node bound.
+   subroutine test_synthetic(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(synthetic_params_type) :: par
+      type(sh_expansion_type) :: shape, outer
+      type(shape_geometry_type) :: geom
+      type(shell_report_type) :: rep
+      real(wp), parameter :: fracs(4) = [0.005_wp, 0.02_wp, 0.05_wp, 0.1_wp]
+      integer, parameter :: degrees(2) = [14, 20]
+      real(wp) :: vprev
+      integer :: d, k, f
+
+      do d = 1, size(degrees)
+         par%nmax = degrees(d)
+         do k = 1, 3
+            call make_synthetic_shape(par, 2024_i8, k, shape, error)
+            if (allocated(error)) return
+            call compute_geometry(shape, geom)
+            vprev = 0.0_wp
+            do f = 1, size(fracs)
+               call build_shell(shape, fracs(f) * geom%length, outer, rep, error, &
+                                label="synthetic "//to_string(degrees(d))//"/"//to_string(k))
+               if (allocated(error)) return
+               write (output_unit, '(4x,a,i0,a,i0,a,f6.3,a,i0,a,i0,a,i0,a,i0,a,es9.2,a,es9.2)') "degree ", degrees(d), &
+                  " shape ", k, " t/L", fracs(f), ": continued ", rep%continued, ", fallback ", rep%fallback, &
+                  ", order ", rep%order, ", lifts ", rep%lifts, ", inside/t ", rep%fit_inside / rep%thickness, &
+                  ", outside/t ", rep%fit_outside / rep%thickness
+               call check(error, rep%fit_inside / rep%thickness <= node_inside_bound, "synthetic inside bound")
+               if (allocated(error)) return
+               call check(error, rep%outer_volume > vprev, "synthetic outer volume must grow with t")
+               if (allocated(error)) return
+               vprev = rep%outer_volume
+            end do
+         end do
+      end do
+   end subroutine test_synthetic
+
+   !> The fitted (lifted) outer surface against the exact R_t (`offset_radius`) at random
+   !> directions: it lies inside R_t by at most inside_bound t; real and synthetic shapes.
+   subroutine test_fit_bound(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(sh_expansion_type), allocatable :: shapes(:)
+      character(len=64), allocatable :: names(:)
+      type(shape_geometry_type), allocatable :: geom(:)
+      type(synthetic_params_type) :: par
+      type(shell_surface_type) :: surf
+      type(sh_expansion_type) :: outer
+      type(shell_report_type) :: rep
+      type(rng_type) :: rng
+      real(wp), parameter :: fracs(3) = [0.005_wp, 0.02_wp, 0.1_wp]
+      real(wp) :: t, u(3), ref, inside, outside
+      integer :: k, f, i
+      logical :: fb
+
+      call coarse_shapes(3, shapes, names, geom, error)
+      if (allocated(error)) return
+      par%nmax = test_degree
+      ! the third real shape is replaced by a synthetic one
+      call make_synthetic_shape(par, 2024_i8, 2, shapes(3), error)
+      if (allocated(error)) return
+      names(3) = "synthetic 14/2"
+      call compute_geometry(shapes(3), geom(3))
+      call new_rng(rng, 5_i8, 3_i8)
+      do k = 1, size(shapes)
+         call new_shell_surface(surf, shapes(k), test_ntheta, test_degree)
+         do f = 1, size(fracs)
+            t = fracs(f) * geom(k)%length
+            call build_shell(shapes(k), t, outer, rep, error, label=trim(names(k)))
+            if (allocated(error)) return
+            inside = 0.0_wp
+            outside = 0.0_wp
+            do i = 1, 200
+               u = [rng%normal(), rng%normal(), rng%normal()]
+               u = u / norm2(u)
+               call offset_radius(surf, acos(u(3)), atan2(u(2), u(1)), t, ref, fb)
+               inside = max(inside, (ref - outer%radius_dir(u)) / t)
+               outside = max(outside, (outer%radius_dir(u) - ref) / t)
+            end do
+            write (output_unit, '(4x,a,a,f6.3,a,es9.2,a,es9.2,a,es9.2,a,es9.2)') trim(names(k)), " t/L", fracs(f), &
+               ": random directions inside/t", inside, ", outside/t", outside, "; nodes inside/t", &
+               rep%fit_inside / t, ", outside/t", rep%fit_outside / t
+            call check(error, rep%fit_inside / t <= node_inside_bound, trim(names(k))//" node inside bound")
+            if (allocated(error)) return
+            call check(error, inside, 0.0_wp, trim(names(k))//" t/L = "//to_string(fracs(f))//" inside bound", &
+                       thr=inside_bound)
+            if (allocated(error)) return
+         end do
+      end do
+   end subroutine test_fit_bound
 
    subroutine test_layers(error)
       type(error_type), allocatable, intent(out) :: error

@@ -1,27 +1,70 @@
-!> The outer radius R_t(u) of a shell of thickness t along one direction u.
+!> The outer radius R_t(u) of a shell of thickness t along the directions u of a grid
+!> (`offset_grid`, the production path) or along one direction (`offset_radius`, the reference).
 !>
-!> First the thesis' construction (Eq 2.1): find the surface point x(theta', phi') whose normal
-!> offset x + t n lies on the ray, r(theta', phi') + t n(theta', phi') = (r(theta, phi) + beta) u,
-!> by Newton-Raphson in (theta', phi') from the sample whose offset point is best aligned with u.
-!> A Newton root is accepted only if it satisfies the distance definition of the shell: beta > 0,
-!> u . n > 0, the offset point is a local minimum of the distance (positive definite Hessian of
-!> |y - x|^2), and no other part of the surface is closer than t (checked with
-!> `surface_distance`). Otherwise the direction falls back on the definition itself,
-!> R_t(u) = max{rho : dist(rho u, particle) <= t}, found by safeguarded Newton/bisection on rho
-!> (the set is an interval [0, R_t] because the dilated body is star-shaped about the centre).
+!> R_t(u) = max{rho : dist(rho u, particle) <= t} = max over surface points x of
+!> g_u(x) = u . x + sqrt(t^2 - |x - (u . x) u|^2): the stationary points of g_u are exactly the
+!> roots of the thesis' Eq 2.1, r(theta', phi') + t n(theta', phi') = (r(theta, phi) + beta) u, so
+!> R_t is the largest valid Newton root, and every surface sample gives a lower bound.
+!>
+!> `offset_grid`: sampled lower bounds and starts (cells of surface samples spread over the
+!> directions their offset points cover), Newton from the best sample (first step from tabulated
+!> derivatives, then exact evaluations in batches), acceptance by the local conditions and the
+!> sampled bound, continuation from neighbours' feet across creases, the definition as fallback.
+!>
+!> `offset_radius`: Newton from the sample best aligned with u, validated by a distance search
+!> over the surface (`surface_distance`), else the definition itself by safeguarded
+!> Newton/bisection on rho (slow; used by the tests as the reference).
 !>
 !> Usage:
-!>     call offset_radius(surf, u, t, rt, used_fallback)
+!>     call offset_grid(surf, t, rt, counts)               ! R_t at every node of surf%grid
+!>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_shells_surface, only: shell_surface_type, eval_surface, surface_frame, surface_distance, cross3
+   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_distance, &
+      & cross3
    implicit none
    private
 
-   public :: offset_radius, offset_newton
+   public :: offset_radius, offset_newton, offset_grid, offset_counts_type
 
    !> Relative tolerance on distances (of t) when validating a Newton root.
    real(wp), parameter :: distance_tol = 1.0e-7_wp
+   !> Newton step (radians) below which the root is finished by a second-order Taylor step
+   !> (the error of R_t is then of the order of the cube of this step times the third derivatives).
+   real(wp), parameter :: finish_step = 3.0e-4_wp
+   !> Tolerance (relative to rmax + t) below the sampled lower bound at which a root is rejected.
+   real(wp), parameter :: bound_tol = 1.0e-9_wp
+   !> Feet of grid-adjacent directions farther apart than this many hmax mark a crease.
+   real(wp), parameter :: jump_factor = 2.0_wp
+   !> Largest number of continuation passes over the grid.
+   integer, parameter :: max_passes = 30
+   !> Largest number of Newton iterations per start.
+   integer, parameter :: max_newton = 30
+   !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
+   real(wp), parameter :: pole_sin = 1.0e-6_wp
+   !> Points per call of `eval_surface_many`.
+   integer, parameter :: eval_block = 256
+
+   !> States of a Newton iteration (enumerator).
+   type :: newton_state_enum
+      integer :: running = 0
+      integer :: converged = 1
+      integer :: failed = 2
+   end type newton_state_enum
+   !> Newton states.
+   type(newton_state_enum), parameter :: newton_state = newton_state_enum()
+
+   !> How the directions of one grid were solved.
+   type :: offset_counts_type
+      !> Directions solved by Newton (Eq 2.1), from the sampled start or by continuation.
+      integer :: newton = 0
+      !> Directions whose root came from a neighbour's foot (continuation across creases).
+      integer :: continued = 0
+      !> Directions that needed the distance-definition fallback.
+      integer :: fallback = 0
+      !> Exact evaluations of the particle expansion spent in Newton iterations.
+      integer :: evaluations = 0
+   end type offset_counts_type
 
 contains
 
@@ -56,6 +99,487 @@ contains
          call definition_radius(surf, u, t, rt)
       end if
    end subroutine offset_radius
+
+   !> R_t at every node of the surface's own grid.
+   !>
+   !> 1. Sampled bound and start: R_t(u) = max over surface points x of
+   !>    g_u(x) = u . x + sqrt(t^2 - |x - (u . x) u|^2) (the farthest point of the ray within t of x),
+   !>    so every sample gives a lower bound. Each sample's value is spread to the directions near
+   !>    its offset direction (x_s + t n_s) / |x_s + t n_s| (within the angle its grid neighbours'
+   !>    offset directions span, plus one spacing); per direction the best sample is the start and
+   !>    its g the lower bound m(u). Where no sample is within t of the ray (thin shells), the start
+   !>    is the sample whose offset direction is best aligned with u.
+   !> 2. Newton (Eq 2.1) from the start: the first step uses the tabulated derivatives, later steps
+   !>    the exact expansion; finished by a second-order Taylor step once the step is below
+   !>    `finish_step`. Accepted when beta > 0, u . n > 0, the foot is a strict local minimum of the
+   !>    distance (1 - t kappa_i > 0) and R >= m(u) (a root below a sampled point is the wrong sheet).
+   !> 3. Continuation: where the feet of adjacent directions jump (a crease: two sheets of the offset
+   !>    surface) or Newton failed, Newton is restarted from the neighbours' feet and the largest
+   !>    accepted root kept (R_t is the maximum over the sheets), pass after pass until nothing changes.
+   !> 4. Directions still unsolved use the definition (`definition_radius`).
+   pure subroutine offset_grid(surf, t, rt, counts)
+      !> Surface data of the particle (its grid is the direction grid).
+      type(shell_surface_type), intent(in) :: surf
+      !> Thickness (> 0).
+      real(wp), intent(in) :: t
+      !> R_t(i, j) at node (i, j).
+      real(wp), intent(out) :: rt(:, :)
+      !> How the directions were solved.
+      type(offset_counts_type), intent(out) :: counts
+      real(wp), allocatable :: lower(:, :), foot(:, :, :), fx(:, :, :)
+      integer, allocatable :: start(:, :, :)
+      logical, allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
+      real(wp) :: ts, ps, rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
+      integer :: nt, np, i, j, k, ii, jj, pass, nev
+      logical :: ok, any_change
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      allocate (lower(nt, np), start(2, nt, np), foot(2, nt, np), fx(3, nt, np), solved(nt, np), &
+                from_nb(nt, np), changed(nt, np), dirty(nt, np))
+      call sampled_starts(surf, t, lower, start)
+      tol = bound_tol * (surf%rmax + t)
+      jump2 = (jump_factor * surf%hmax)**2
+      from_nb = .false.
+      call first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, counts%evaluations)
+      ! continuation across creases and from solved neighbours
+      dirty = .true.
+      do pass = 1, max_passes
+         any_change = .false.
+         changed = .false.
+         do j = 1, np
+            do i = 1, nt
+               if (.not. dirty(i, j)) cycle
+               do k = 1, 4
+                  call neighbour(i, j, k, nt, np, ii, jj)
+                  if (.not. solved(ii, jj)) cycle
+                  if (solved(i, j)) then
+                     if (sum((fx(:, i, j) - fx(:, ii, jj))**2) <= jump2) cycle
+                  end if
+                  call node_frame(surf, i, j, u, e1, e2)
+                  th = foot(1, ii, jj)
+                  ph = foot(2, ii, jj)
+                  call foot_newton(surf, u, e1, e2, t, surf%r(i, j), th, ph, rho, xf, ok, nev)
+                  counts%evaluations = counts%evaluations + nev
+                  if (.not. (ok .and. rho >= lower(i, j) - tol)) cycle
+                  if (solved(i, j)) then
+                     if (rho <= rt(i, j) + tol) cycle
+                  end if
+                  rt(i, j) = rho
+                  solved(i, j) = .true.
+                  from_nb(i, j) = .true.
+                  foot(:, i, j) = [th, ph]
+                  fx(:, i, j) = xf
+                  changed(i, j) = .true.
+                  any_change = .true.
+               end do
+            end do
+         end do
+         if (.not. any_change) exit
+         ! next pass: the changed nodes and their neighbours
+         dirty = .false.
+         do j = 1, np
+            do i = 1, nt
+               if (.not. changed(i, j)) cycle
+               dirty(i, j) = .true.
+               do k = 1, 4
+                  call neighbour(i, j, k, nt, np, ii, jj)
+                  dirty(ii, jj) = .true.
+               end do
+            end do
+         end do
+      end do
+      counts%newton = count(solved)
+      counts%continued = count(from_nb .and. solved)
+      counts%fallback = count(.not. solved)
+      do j = 1, np
+         do i = 1, nt
+            if (solved(i, j)) cycle
+            call definition_radius(surf, surf%u(:, i, j), t, rt(i, j))
+         end do
+      end do
+   end subroutine offset_grid
+
+   !> Newton from every node's sampled start, all directions together: the first step from the
+   !> tabulated derivatives, then rounds of exact evaluations of the directions still running,
+   !> `eval_block` points per call of `eval_surface_many`.
+   pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: t, lower(:, :), tol
+      integer, intent(in) :: start(:, :, :)
+      real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
+      logical, intent(out) :: solved(:, :)
+      integer, intent(inout) :: nev
+      real(wp), allocatable :: ts(:), ps(:), f(:, :), bt(:), bp(:), bf(:, :)
+      integer, allocatable :: state(:), run(:)
+      real(wp) :: u(3), e1(3), e2(3), rho, xf(3)
+      integer :: nt, np, n, k, i, j, it, nrun, b0, b1
+
+      nt = size(rt, 1)
+      np = size(rt, 2)
+      n = nt * np
+      allocate (ts(n), ps(n), f(6, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block))
+      do j = 1, np
+         do i = 1, nt
+            k = i + (j - 1) * nt
+            ts(k) = surf%grid%sphere%theta(start(1, i, j))
+            ps(k) = surf%grid%sphere%phi(start(2, i, j))
+            f(:, k) = surf%f(:, start(1, i, j), start(2, i, j))
+            state(k) = newton_state%running
+         end do
+      end do
+      rt = 0.0_wp
+      fx = 0.0_wp
+      do it = 1, max_newton
+         nrun = 0
+         do j = 1, np
+            do i = 1, nt
+               k = i + (j - 1) * nt
+               if (state(k) /= newton_state%running) cycle
+               call node_frame(surf, i, j, u, e1, e2)
+               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), ts(k), ps(k), state(k), rho, xf)
+               if (state(k) == newton_state%running) then
+                  nrun = nrun + 1
+                  run(nrun) = k
+               else if (state(k) == newton_state%converged) then
+                  rt(i, j) = rho
+                  fx(:, i, j) = xf
+               end if
+            end do
+         end do
+         if (nrun == 0) exit
+         do b0 = 1, nrun, eval_block
+            b1 = min(nrun, b0 + eval_block - 1)
+            bt(1:b1 - b0 + 1) = ts(run(b0:b1))
+            bp(1:b1 - b0 + 1) = ps(run(b0:b1))
+            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1))
+            f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
+         end do
+         nev = nev + nrun
+      end do
+      do j = 1, np
+         do i = 1, nt
+            k = i + (j - 1) * nt
+            solved(i, j) = state(k) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
+            if (.not. solved(i, j)) rt(i, j) = 0.0_wp
+            foot(:, i, j) = [ts(k), ps(k)]
+         end do
+      end do
+   end subroutine first_pass
+
+   !> Unit direction and the two perpendicular unit vectors (theta-hat, phi-hat) of node (i, j).
+   pure subroutine node_frame(surf, i, j, u, e1, e2)
+      type(shell_surface_type), intent(in) :: surf
+      integer, intent(in) :: i, j
+      real(wp), intent(out) :: u(3), e1(3), e2(3)
+      real(wp) :: st, ct, cp, sp
+      st = surf%grid%sphere%sint(i)
+      ct = surf%grid%sphere%x(i)
+      ! cos(phi_j) and sin(phi_j) from the grid's trigonometric table
+      cp = surf%grid%trig(2, j)
+      sp = surf%grid%trig(surf%grid%lmax + 2, j)
+      u = [st * cp, st * sp, ct]
+      e1 = [ct * cp, ct * sp, -st]
+      e2 = [-sp, cp, 0.0_wp]
+   end subroutine node_frame
+
+   !> Neighbour k (1..4: theta -, theta +, phi -, phi +) of node (i, j).
+   !> Beyond the first and last rings the neighbour is the same ring across the pole.
+   pure subroutine neighbour(i, j, k, nt, np, ii, jj)
+      integer, intent(in) :: i, j, k, nt, np
+      integer, intent(out) :: ii, jj
+      ii = i
+      jj = j
+      select case (k)
+      case (1)
+         ii = i - 1
+      case (2)
+         ii = i + 1
+      case (3)
+         jj = 1 + modulo(j - 2, np)
+      case default
+         jj = 1 + modulo(j, np)
+      end select
+      if (ii < 1 .or. ii > nt) then
+         ii = i
+         jj = 1 + modulo(j - 1 + np / 2, np)
+      end if
+   end subroutine neighbour
+
+   !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
+   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
+   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by strips across the
+   !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
+   !> directions, so each cell's corners are tried on the direction nodes inside the (theta, phi)
+   !> box of those directions, widened by a quarter spacing. The node of every direction lies in
+   !> the image of the cell holding its true foot, whose corners are within one cell of it.
+   pure subroutine sampled_starts(surf, t, lower, start)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: t
+      real(wp), intent(out) :: lower(:, :)
+      integer, intent(out) :: start(:, :, :)
+      real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
+      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, du, perp2, g, t2, c, dphi
+      real(wp) :: pole(3), pole_dir(3, 2)
+      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, ci(4), cj(4), npc
+      logical :: all_phi
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      dphi = two_pi / np
+      allocate (qd(3, nt, np), qth(nt, np), qph(nt, np), align(nt, np), xx(nt, np))
+      do j = 1, np
+         do i = 1, nt
+            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            qd(:, i, j) = q / sqrt(dot_product(q, q))
+            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
+            qph(i, j) = atan2(qd(2, i, j), qd(1, i, j))
+            xx(i, j) = dot_product(surf%x(:, i, j), surf%x(:, i, j))
+            start(:, i, j) = [i, j]
+         end do
+      end do
+      do kc = 1, 2
+         ii = merge(1, nt, kc == 1)
+         pole = 0.0_wp
+         do j = 1, np
+            pole = pole + surf%x(:, ii, j) + t * surf%n(:, ii, j)
+         end do
+         pole_dir(:, kc) = pole / norm2(pole)
+      end do
+      lower = -huge(1.0_wp)
+      align = -2.0_wp
+      mth = 0.25_wp * pi / nt
+      mph = 0.25_wp * dphi
+      t2 = t * t
+      do j = 1, np
+         jj = 1 + modulo(j, np)
+         do i = 0, nt
+            ! corners of the cell between rows i and i + 1 (rows 0 and nt + 1: across the pole)
+            ci = [i, i, i + 1, i + 1]
+            cj = [j, jj, j, jj]
+            do kc = 1, 4
+               if (ci(kc) < 1 .or. ci(kc) > nt) then
+                  ci(kc) = merge(1, nt, ci(kc) < 1)
+                  cj(kc) = 1 + modulo(cj(kc) - 1 + np / 2, np)
+               end if
+            end do
+            thlo = pi
+            thhi = 0.0_wp
+            phlo = 0.0_wp
+            phhi = 0.0_wp
+            npc = 4
+            if (i == 0 .or. i == nt) then
+               ! a polar triangle: two corners of the first (last) ring and the offset direction of
+               ! the pole, approximated by the mean offset point of that ring
+               npc = 2
+               ci(1:2) = merge(1, nt, i == 0)
+               cj(1:2) = [j, jj]
+               pole = pole_dir(:, merge(1, 2, i == 0))
+               d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
+               if (min(d, pi - d) < 0.5_wp * minval(surf%grid%sphere%theta)) then
+                  ! at the pole itself (closer than any node): its azimuth is meaningless
+                  thlo = min(thlo, d)
+                  thhi = max(thhi, d)
+               else
+                  call widen(d, atan2(pole(2), pole(1)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+               end if
+            end if
+            do kc = 1, npc
+               call widen(qth(ci(kc), cj(kc)), qph(ci(kc), cj(kc)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+            end do
+            all_phi = phhi - phlo > pi
+            if (all_phi) then
+               ! the patch holds a pole
+               if (qd(3, ci(1), cj(1)) > 0.0_wp) then
+                  thlo = 0.0_wp
+               else
+                  thhi = pi
+               end if
+            end if
+            call row_range(surf%grid%sphere%theta, thlo - mth, thhi + mth, i0, i1)
+            if (all_phi) then
+               j0 = 1
+               ncol = np
+            else
+               phlo = qph(ci(1), cj(1)) + phlo - mph
+               phhi = qph(ci(1), cj(1)) + phhi + mph
+               j0 = ceiling(phlo / dphi) + 1
+               ncol = floor(phhi / dphi) + 2 - j0
+            end if
+            do jc = 1, ncol
+               ja = 1 + modulo(j0 + jc - 2, np)
+               do ia = i0, i1
+                  do kc = 1, npc
+                     ii = ci(kc)
+                     du = dot_product(surf%u(:, ia, ja), surf%x(:, ii, cj(kc)))
+                     perp2 = xx(ii, cj(kc)) - du * du
+                     if (perp2 < t2) then
+                        ! g = du + sqrt(t2 - perp2) > lower, without the square root unless it is
+                        g = lower(ia, ja) - du
+                        if (g < 0.0_wp .or. t2 - perp2 > g * g) then
+                           lower(ia, ja) = du + sqrt(t2 - perp2)
+                           start(:, ia, ja) = [ii, cj(kc)]
+                        end if
+                     else if (lower(ia, ja) == -huge(1.0_wp)) then
+                        c = dot_product(surf%u(:, ia, ja), qd(:, ii, cj(kc)))
+                        if (c > align(ia, ja)) then
+                           align(ia, ja) = c
+                           start(:, ia, ja) = [ii, cj(kc)]
+                        end if
+                     end if
+                  end do
+               end do
+            end do
+         end do
+      end do
+   end subroutine sampled_starts
+
+   !> Widen the box [thlo, thhi] x [phlo, phhi] (phi relative to ph0, unwrapped) to hold (th, ph).
+   pure subroutine widen(th, ph, ph0, thlo, thhi, phlo, phhi)
+      real(wp), intent(in) :: th, ph, ph0
+      real(wp), intent(inout) :: thlo, thhi, phlo, phhi
+      real(wp) :: d
+      thlo = min(thlo, th)
+      thhi = max(thhi, th)
+      d = modulo(ph - ph0 + pi, two_pi) - pi
+      phlo = min(phlo, d)
+      phhi = max(phhi, d)
+   end subroutine widen
+
+   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i); i1 < i0 when none.
+   pure subroutine row_range(theta, lo, hi, i0, i1)
+      real(wp), intent(in) :: theta(:), lo, hi
+      integer, intent(out) :: i0, i1
+      integer :: i
+      i0 = size(theta) + 1
+      i1 = 0
+      if (theta(1) <= theta(size(theta))) then
+         i0 = first_at_least(theta, lo)
+         i1 = first_at_least(theta, hi) - 1
+         if (i1 < size(theta)) then
+            if (theta(i1 + 1) <= hi) i1 = i1 + 1
+         end if
+      else
+         do i = 1, size(theta)
+            if (theta(i) >= lo .and. theta(i) <= hi) then
+               i0 = min(i0, i)
+               i1 = max(i1, i)
+            end if
+         end do
+      end if
+   end subroutine row_range
+
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none).
+   pure function first_at_least(theta, v) result(k)
+      real(wp), intent(in) :: theta(:), v
+      integer :: k, lo, hi, mid
+      lo = 1
+      hi = size(theta) + 1
+      do while (lo < hi)
+         mid = (lo + hi) / 2
+         if (theta(mid) >= v) then
+            hi = mid
+         else
+            lo = mid + 1
+         end if
+      end do
+      k = lo
+   end function first_at_least
+
+   !> Newton-Raphson for Eq 2.1 along u (theta-hat e1, phi-hat e2 span the plane perpendicular to
+   !> u) from (ts, ps); f0, when present, holds r and its derivatives at the start (the first step
+   !> then needs no evaluation). See `newton_update` for the finish and the local conditions.
+   pure subroutine foot_newton(surf, u, e1, e2, t, rnode, ts, ps, rho, xf, ok, nev, f0)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode
+      real(wp), intent(inout) :: ts, ps
+      real(wp), intent(out) :: rho, xf(3)
+      logical, intent(out) :: ok
+      integer, intent(out) :: nev
+      real(wp), intent(in), optional :: f0(6)
+      real(wp) :: f(6)
+      integer :: it, state
+
+      ok = .false.
+      rho = 0.0_wp
+      xf = 0.0_wp
+      nev = 0
+      if (present(f0)) then
+         f = f0
+      else
+         if (abs(sin(ts)) < pole_sin) return
+         call eval_surface(surf, ts, ps, f)
+         nev = 1
+      end if
+      do it = 1, max_newton
+         call newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+         if (state /= newton_state%running) exit
+         call eval_surface(surf, ts, ps, f)
+         nev = nev + 1
+      end do
+      ok = state == newton_state%converged
+   end subroutine foot_newton
+
+   !> One Newton step for Eq 2.1 at (ts, ps) with f = r and its derivatives there. Once the step is
+   !> below `finish_step` the root is finished by a second-order Taylor step, rho = g_u(x + x_t dt +
+   !> x_p dp + second-order terms), and state = converged if the local conditions hold (beta > 0 with
+   !> rnode = r(u), u . n > 0, strict local minimum of the distance: 1 - t kappa_i > 0), else failed.
+   !> Otherwise (ts, ps) takes the (damped) step and state = running (failed near the poles).
+   pure subroutine newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6)
+      real(wp), intent(inout) :: ts, ps
+      integer, intent(out) :: state
+      real(wp), intent(out) :: rho, xf(3)
+      real(wp) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3), x2(3)
+      real(wp) :: nv(3), nt(3), np(3), nn, nh(3), q(3), qt(3), qp(3), sgn
+      real(wp) :: f1, f2, j11, j12, j21, j22, det, dt, dp, lam, h11, h12, h22, du, perp2
+
+      state = newton_state%failed
+      rho = 0.0_wp
+      xf = 0.0_wp
+      call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
+      sgn = sign(1.0_wp, sin(ts))
+      nv = sgn * cross3(xt, xp)
+      nn = sqrt(dot_product(nv, nv))
+      nh = nv / nn
+      nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
+      np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
+      nt = (nt - nh * dot_product(nh, nt)) / nn
+      np = (np - nh * dot_product(nh, np)) / nn
+      q = x + t * nh
+      qt = xt + t * nt
+      qp = xp + t * np
+      f1 = dot_product(q, e1)
+      f2 = dot_product(q, e2)
+      j11 = dot_product(qt, e1)
+      j12 = dot_product(qp, e1)
+      j21 = dot_product(qt, e2)
+      j22 = dot_product(qp, e2)
+      det = j11 * j22 - j12 * j21
+      if (.not. abs(det) > tiny(det) * 1.0e10_wp) return
+      dt = -(j22 * f1 - j12 * f2) / det
+      dp = -(j11 * f2 - j21 * f1) / det
+      if (max(abs(dt), abs(dp)) <= finish_step) then
+         h11 = dot_product(xt, xt) - t * dot_product(nh, xtt)
+         h12 = dot_product(xt, xp) - t * dot_product(nh, xtp)
+         h22 = dot_product(xp, xp) - t * dot_product(nh, xpp)
+         if (.not. (h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. dot_product(nh, u) > 0.0_wp)) return
+         x2 = x + xt * dt + xp * dp + 0.5_wp * (xtt * dt * dt + 2.0_wp * xtp * dt * dp + xpp * dp * dp)
+         du = dot_product(u, x2)
+         perp2 = max(0.0_wp, dot_product(x2, x2) - du * du)
+         if (perp2 > t * t) return
+         rho = du + sqrt(t * t - perp2)
+         xf = x2
+         ts = ts + dt
+         ps = ps + dp
+         if (rho > rnode) state = newton_state%converged
+         return
+      end if
+      lam = min(1.0_wp, 0.2_wp / max(abs(dt), abs(dp)))
+      ts = ts + lam * dt
+      ps = ps + lam * dp
+      if (abs(sin(ts)) >= pole_sin) state = newton_state%running
+   end subroutine newton_update
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

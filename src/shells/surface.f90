@@ -13,13 +13,13 @@
 !>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_sh_expansion, only: sh_expansion_type
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals
+   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals, sh_synthesize
    implicit none
    private
 
-   public :: shell_surface_type, new_shell_surface, eval_surface, surface_frame, surface_distance, &
-      & closest_point, cross3
+   public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
+      & surface_distance, closest_point, cross3
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -35,6 +35,10 @@ module anm_shells_surface
       real(wp), allocatable :: n(:, :, :)
       !> Radii at the samples.
       real(wp), allocatable :: r(:, :)
+      !> r and its derivatives at the samples, f(:, i, j) as returned by `eval_surface`.
+      real(wp), allocatable :: f(:, :, :)
+      !> Unit directions of the grid nodes, u(3, ntheta, nphi).
+      real(wp), allocatable :: u(:, :, :)
       !> Largest distance between grid-adjacent samples (diagonals included).
       real(wp) :: hmax = 0.0_wp
       !> Largest sampled radius.
@@ -79,22 +83,94 @@ contains
       do j = 1, np
          jn = 1 + mod(j, np)
          do i = 1, nt
-            surf%r(i, j) = norm2(surf%x(:, i, j))
-            h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i, jn)))
+            surf%r(i, j) = sqrt(dot_product(surf%x(:, i, j), surf%x(:, i, j)))
+            h = max(h, dist2(surf%x(:, i, j), surf%x(:, i, jn)))
             if (i < nt) then
-               h = max(h, norm2(surf%x(:, i, j) - surf%x(:, i + 1, j)), norm2(surf%x(:, i, j) - surf%x(:, i + 1, jn)), &
-                       norm2(surf%x(:, i, jn) - surf%x(:, i + 1, j)))
+               h = max(h, dist2(surf%x(:, i, j), surf%x(:, i + 1, j)), dist2(surf%x(:, i, j), surf%x(:, i + 1, jn)), &
+                       dist2(surf%x(:, i, jn), surf%x(:, i + 1, j)))
             end if
          end do
       end do
       ! the polar caps: samples of the first and last rings are joined across the pole
       do j = 1, np / 2
-         h = max(h, norm2(surf%x(:, 1, j) - surf%x(:, 1, j + np / 2)), norm2(surf%x(:, nt, j) - surf%x(:, nt, j + np / 2)))
+         h = max(h, dist2(surf%x(:, 1, j), surf%x(:, 1, j + np / 2)), dist2(surf%x(:, nt, j), surf%x(:, nt, j + np / 2)))
       end do
+      h = sqrt(h)
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
+      allocate (surf%f(6, nt, np), surf%u(3, nt, np))
+      call grid_derivatives(surf%grid, shape, surf%f)
+      do j = 1, np
+         do i = 1, nt
+            surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
+         end do
+      end do
    end subroutine new_shell_surface
+
+   !> r and its first and second angular derivatives at every node of `grid` (the layout of
+   !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
+   !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
+   !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
+   pure subroutine grid_derivatives(grid, shape, f)
+      !> Grid with tables.
+      type(sh_grid_type), intent(in) :: grid
+      !> Expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
+      real(wp), intent(out) :: f(:, :, :)
+      type(sh_expansion_type) :: dphi, dphi2, lap
+      real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
+      integer :: n, m, nmax, nt, np, i
+      real(wp) :: st, ct
+
+      nmax = min(shape%nmax, grid%lmax)
+      nt = grid%sphere%ntheta
+      np = grid%sphere%nphi
+      allocate (a(0:nmax, 0:nmax), b(0:nmax, 0:nmax), w1(nt, np), w2(nt, np), w3(nt, np))
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = m * shape%b(n, m)
+            b(n, m) = -m * shape%a(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(dphi, a, b)
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = -real(m * m, wp) * shape%a(n, m)
+            b(n, m) = -real(m * m, wp) * shape%b(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(dphi2, a, b)
+      do m = 0, nmax
+         do n = m, nmax
+            a(n, m) = real(n * (n + 1), wp) * shape%a(n, m)
+            b(n, m) = real(n * (n + 1), wp) * shape%b(n, m)
+         end do
+      end do
+      call new_sh_expansion_real(lap, a, b)
+      call sh_synthesize(grid, shape, w1, w2, w3, nused=nmax)
+      f(1, :, :) = w1
+      f(2, :, :) = w2
+      call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
+      f(3, :, :) = w1
+      f(5, :, :) = w2
+      call sh_synthesize(grid, dphi2, w1, nused=nmax)
+      f(6, :, :) = w1
+      call sh_synthesize(grid, lap, w3, nused=nmax)
+      do i = 1, nt
+         st = grid%sphere%sint(i)
+         ct = grid%sphere%x(i)
+         f(4, i, :) = -ct / st * f(2, i, :) - w3(i, :) - f(6, i, :) / (st * st)
+      end do
+   end subroutine grid_derivatives
+
+   !> Squared distance between two points.
+   pure function dist2(a, b) result(d)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: d
+      d = (a(1) - b(1))**2 + (a(2) - b(2))**2 + (a(3) - b(3))**2
+   end function dist2
 
    !> r and its derivatives at (theta, phi): f = [r, r_t, r_p, r_tt, r_tp, r_pp] (t = theta,
    !> p = phi, plain derivatives). sin(theta) may be negative (theta outside [0, pi]), which
@@ -169,6 +245,83 @@ contains
          f(6) = f(6) - msq * (a0 * cm + b0 * sm)
       end do
    end subroutine eval_surface
+
+   !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
+   !> with the points innermost (vectorised), for blocks of a few hundred points.
+   pure subroutine eval_surface_many(surf, theta, phi, f)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Polar angles and azimuths (|sin(theta)| not tiny).
+      real(wp), intent(in) :: theta(:), phi(:)
+      !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
+      real(wp), intent(out) :: f(:, :)
+      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+      real(wp), dimension(size(theta)) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
+                                          a0, b0, a1, b1, ann, bnn
+      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq
+      integer :: m, n, k0, nmax
+
+      x = cos(theta)
+      s = sin(theta)
+      cp = cos(phi)
+      sp = sin(phi)
+      inv_s = 1.0_wp / s
+      cots = x * inv_s
+      nmax = surf%shape%nmax
+      pmm = inv_sqrt_4pi
+      cm = 1.0_wp
+      sm = 0.0_wp
+      f = 0.0_wp
+      do m = 0, nmax
+         if (m > 0) then
+            pmm = -surf%shape%table%sect(m) * s * pmm
+            cnew = cm * cp - sm * sp
+            sm = sm * cp + cm * sp
+            cm = cnew
+         end if
+         k0 = surf%shape%table%idx(m)
+         rn = real(m, wp)
+         nn1 = rn * (rn + 1.0_wp)
+         an = surf%shape%a(m, m)
+         bn = surf%shape%b(m, m)
+         p0 = 0.0_wp
+         p1 = pmm
+         d1 = rn * x * p1 * inv_s
+         a0 = an * p1
+         b0 = bn * p1
+         a1 = an * d1
+         b1 = bn * d1
+         ann = an * nn1 * p1
+         bnn = bn * nn1 * p1
+         do n = m + 1, nmax
+            rn = real(n, wp)
+            nn1 = rn * (rn + 1.0_wp)
+            ca = surf%shape%table%ca(k0 + n - m)
+            cb = merge(0.0_wp, surf%shape%table%cb(k0 + n - m), n == m + 1)
+            en = surf%enm(k0 + n - m)
+            an = surf%shape%a(n, m)
+            bn = surf%shape%b(n, m)
+            p2 = ca * x * p1 - cb * p0
+            p0 = p1
+            p1 = p2
+            d1 = (rn * x * p1 - en * p0) * inv_s
+            a0 = a0 + an * p1
+            b0 = b0 + bn * p1
+            a1 = a1 + an * d1
+            b1 = b1 + bn * d1
+            ann = ann + (an * nn1) * p1
+            bnn = bnn + (bn * nn1) * p1
+         end do
+         msq = real(m * m, wp)
+         f(1, :) = f(1, :) + a0 * cm + b0 * sm
+         f(2, :) = f(2, :) + a1 * cm + b1 * sm
+         f(3, :) = f(3, :) + m * (b0 * cm - a0 * sm)
+         f(4, :) = f(4, :) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm &
+                   + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
+         f(5, :) = f(5, :) + m * (b1 * cm - a1 * sm)
+         f(6, :) = f(6, :) - msq * (a0 * cm + b0 * sm)
+      end do
+   end subroutine eval_surface_many
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
    !> x, x_t, x_p, x_tt, x_tp, x_pp (Cartesian, body frame).
