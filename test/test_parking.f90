@@ -35,7 +35,8 @@ contains
               new_unittest("walls: particles stay inside and verify passes", test_walls_job), &
               new_unittest("same seed gives the same model, another seed another", test_reproducible), &
               new_unittest("an unreachable target ends with a shortfall, not a loop", test_shortfall), &
-              new_unittest("an unreadable shape folder names the variable", test_bad_source)]
+              new_unittest("an unreadable shape folder names the variable", test_bad_source), &
+              new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -278,4 +279,39 @@ contains
       call check(error, index(err%message, "source") > 0 .and. index(err%message, "no/such/folder") > 0, &
                  "message must name the variable and the folder: "//err%message)
    end subroutine test_bad_source
+   subroutine test_shell_modes(error)
+      type(error_type), allocatable, intent(out) :: error
+      character(len=*), parameter :: modes(3) = [character(len=13) :: "exclude", "shell_overlap", "overlap"]
+      real(wp), parameter :: factor(3) = [2.0_wp, 1.0_wp, 0.0_wp]
+      type(model_type) :: m
+      real(wp) :: gap, gmin, d(3), t
+      integer :: k, i, j
+      ! spheres of radius 1 (length 2) with a shell of 5 % of the length: t = 0.1 mm; for spheres
+      ! the surface gap is |c_i - c_j| - 2 exactly (nearest periodic image)
+      t = 0.1_wp
+      do k = 1, 3
+         call run_nml("modes.nml", "&box length = 8, 8, 8 /"//new_line("a")// &
+                      "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.3, source = 'sphere', order = 0 /" &
+                      //new_line("a")//"&parking max_locations = 20000 /"//new_line("a")// &
+                      "&shells nlayer = 1, thickness = 0.05, mode = '"//trim(modes(k))//"' /", m, error)
+         if (allocated(error)) return
+         gmin = huge(1.0_wp)
+         do i = 1, m%np
+            do j = i + 1, m%np
+               d = m%center(:, i) - m%center(:, j)
+               d = d - m%box * anint(d / m%box)
+               gmin = min(gmin, norm2(d) - 2.0_wp)
+            end do
+         end do
+         print '(a,a13,a,f8.5,a,f6.3,a,f7.4)', "        mode ", modes(k), ": smallest gap ", gmin, &
+            " mm (bound ", factor(k) * t, "), fraction ", m%achieved_fraction(1)
+         call check(error, gmin >= factor(k) * t - 1.0e-9_wp, "gap below the mode's bound")
+         if (allocated(error)) return
+         if (k < 3) then
+            ! the bound is attained closely: random parking brings some pairs near contact
+            call check(error, gmin < factor(k) * t + 0.2_wp, "gap far above the bound: shells not used?")
+            if (allocated(error)) return
+         end if
+      end do
+   end subroutine test_shell_modes
 end module test_parking

@@ -41,7 +41,7 @@ contains
       end do
       write (unit, '(a,20x,f9.5,1x,f9.5,11x,i10)') "total", sum(model%target_fraction), sum(model%achieved_fraction), &
          sum(model%count)
-      if (shells) write (unit, '(a,f9.5)') "total shell volume fraction (sum over particles, overlaps counted once per shell): ", &
+      if (shells) write (unit, '(a,f9.5)') "total shell volume fraction (sum of the shell volumes, not corrected for overlaps): ", &
          sum(model%shell_fraction)
    end subroutine write_summary
 
