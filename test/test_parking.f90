@@ -12,6 +12,7 @@ module test_parking
    use anm_parking_config, only: run_config_type, read_config
    use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_io_model, only: write_model, read_model
+   use omp_lib, only: omp_set_num_threads, omp_get_max_threads
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -36,7 +37,8 @@ contains
               new_unittest("same seed gives the same model, another seed another", test_reproducible), &
               new_unittest("an unreachable target ends with a shortfall, not a loop", test_shortfall), &
               new_unittest("an unreadable shape folder names the variable", test_bad_source), &
-              new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes)]
+              new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes), &
+              new_unittest("1 and 2 threads give the same model", test_threads)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -314,4 +316,25 @@ contains
          end if
       end do
    end subroutine test_shell_modes
+   subroutine test_threads(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: nthreads
+      character(len=*), parameter :: text = "&box length = 8, 8, 8 /"//new_line("a")// &
+         "&sieves nsieve = 3, min_width = 2.0, 1.0, 0.5, max_width = 2.4, 1.2, 0.6, fraction = 0.12, 0.08, 0.05, " &
+         //"order = 10, 6, 4 /"//new_line("a")//"&synthetic count = 6 /"//new_line("a")// &
+         "&shells nlayer = 1, thickness = 0.02, mode = 'shell_overlap' /"//new_line("a")//"&run seed = 4 /"
+      nthreads = omp_get_max_threads()
+      call omp_set_num_threads(1)
+      call run_nml("threads1.nml", text, a, error)
+      call omp_set_num_threads(2)
+      if (.not. allocated(error)) call run_nml("threads2.nml", text, b, error)
+      call omp_set_num_threads(nthreads)
+      if (allocated(error)) return
+      print '(a,i0,a,i0,a)', "        1 thread: ", a%np, " particles, 2 threads: ", b%np, " particles"
+      call check(error, a%np == b%np .and. a%attempts == b%attempts, "particle or attempt counts differ")
+      if (allocated(error)) return
+      call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. all(a%scale == b%scale) &
+                 .and. all(a%shape == b%shape) .and. all(a%sieve == b%sieve), "models differ between 1 and 2 threads")
+   end subroutine test_threads
 end module test_parking

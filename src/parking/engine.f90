@@ -34,6 +34,7 @@ module anm_parking_engine
    use anm_parking_config, only: run_config_type, shell_mode, resolved_namelist
    use anm_parking_cell_list, only: cell_list_type, new_cell_list
    use anm_io_model, only: model_type
+   use omp_lib, only: omp_get_max_threads
    implicit none
    private
 
@@ -66,6 +67,19 @@ module anm_parking_engine
       real(wp) :: r_out = 0.0_wp
    end type particle_kind_type
 
+   !> The attempt sequence of one particle: the thesis' four nested randomness sources, drawn from
+   !> the particle's own stream in a fixed order (shape, [width level], width, rotation, centre).
+   type :: attempt_type
+      type(rng_type) :: rng
+      integer :: is = 0, iz = 0, io = 0, il = 0
+      integer :: kk = 0, k = 0
+      real(wp) :: w = 0.0_wp, sc = 0.0_wp, r(3, 3) = 0.0_wp, c(3) = 0.0_wp
+      !> Attempts drawn so far.
+      integer(i8) :: count = 0
+      !> All attempts exhausted.
+      logical :: done = .false.
+   end type attempt_type
+
 contains
 
    !> Build the model the configuration asks for. Progress goes to `progress_unit` (stderr in the
@@ -85,14 +99,14 @@ contains
       integer, intent(in), optional :: progress_unit
       type(contact_params_type) :: params
       type(cell_list_type) :: cl
-      type(rng_type) :: rng
       integer, allocatable :: first_kind(:), nkind_sieve(:)
       real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:), cand_shift(:, :)
       integer, allocatable :: sieve_of(:), cand(:)
-      real(wp) :: vbox, vol, target, v, c(3), r(3, 3), sc, w, rho_min
+      real(wp) :: vbox, vol, target, v, sc, rho_min
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
-      integer :: s, np, k, kk, is, iz, io, il, ilev, nstream, nlev
-      logical :: placed, keep
+      integer :: s, np, k, b, nstream, nlev, np_frozen, batch
+      logical :: keep, sieve_done
+      type(attempt_type), allocatable :: at(:)
 
       call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
       if (allocated(error)) return
@@ -116,6 +130,8 @@ contains
       model%achieved_fraction = 0.0_wp
       model%count = 0
       model%shell_fraction = 0.0_wp
+      ! particles speculated per batch: any value gives the same model (see phase 2)
+      batch = 4 * omp_get_max_threads()
       call system_clock(t0, rate)
       tlast = t0
 
@@ -124,46 +140,62 @@ contains
          vol = 0.0_wp
          attempts_sieve = 0
          nstream = 0
-         do while (vol < target)
-            nstream = nstream + 1
-            call new_rng(rng, cfg%seed, int(s, i8) * 4294967296_i8 + nstream)
-            placed = .false.
-            shapes: do is = 1, cfg%max_shapes
-               ! kinds of a sieve: nlev blocks (width levels) of its shapes
-               kk = first_kind(s) + rng%below(nkind_sieve(s) / nlev) - 1
-               do iz = 1, cfg%max_sizes
-                  if (nlev > 1) then
-                     ilev = rng%below(width_levels)
-                     k = kk + (ilev - 1) * (nkind_sieve(s) / nlev)
-                     w = cfg%min_width(s) + (ilev - 0.5_wp) * (cfg%max_width(s) - cfg%min_width(s)) / width_levels
-                  else
-                     k = kk
-                     w = rng%uniform_range(cfg%min_width(s), cfg%max_width(s))
-                  end if
-                  sc = w / kinds(k)%width
-                  do io = 1, cfg%max_orientations
-                     r = random_rotation(rng)
-                     do il = 1, cfg%max_locations
-                        c = random_centre(rng, sc * kinds(k)%body%r_min)
-                        attempts = attempts + 1
-                        attempts_sieve = attempts_sieve + 1
-                        if (fits(k, c, r, sc)) then
-                           placed = .true.
-                           exit shapes
-                        end if
-                     end do
+         sieve_done = .false.
+         do while (vol < target .and. .not. sieve_done)
+            ! Phase 1 (parallel): the next `batch` particles each find their first fitting attempt
+            ! against the frozen packing. Phase 2 (in order): each is re-checked against the
+            ! particles accepted before it in this batch and, if hit, continues its own attempt
+            ! sequence. Adding particles only adds overlaps, so this is exactly the serial
+            ! result whatever the batch size and the number of threads.
+            allocate (at(batch))
+            !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
+            do b = 1, batch
+               block
+                  integer, allocatable :: bcand(:)
+                  real(wp), allocatable :: bshift(:, :)
+                  call new_rng(at(b)%rng, cfg%seed, int(s, i8) * 4294967296_i8 + nstream + b)
+                  do
+                     call next_attempt(at(b), s)
+                     if (at(b)%done) exit
+                     if (fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, 0, bcand, bshift)) exit
                   end do
-               end do
-            end do shapes
-            if (.not. placed) exit
-            v = sc**3 * kinds(k)%volume
-            keep = vol + v <= target .or. (vol + v - target) <= (target - vol)
-            if (.not. keep) exit
-            call add_particle(k, c, r, sc)
-            vol = vol + v
-            model%count(s) = model%count(s) + 1
-            if (cfg%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
-                                                         + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
+               end block
+            end do
+            !$omp end parallel do
+            np_frozen = np
+            do b = 1, batch
+               nstream = nstream + 1
+               if (.not. at(b)%done) then
+                  if (.not. fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, np_frozen, cand, cand_shift)) then
+                     do
+                        call next_attempt(at(b), s)
+                        if (at(b)%done) exit
+                        if (fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, 0, cand, cand_shift)) exit
+                     end do
+                  end if
+               end if
+               attempts = attempts + at(b)%count - merge(1, 0, at(b)%done)
+               attempts_sieve = attempts_sieve + at(b)%count - merge(1, 0, at(b)%done)
+               if (at(b)%done) then
+                  sieve_done = .true.
+                  exit
+               end if
+               k = at(b)%k
+               sc = at(b)%sc
+               v = sc**3 * kinds(k)%volume
+               keep = vol + v <= target .or. (vol + v - target) <= (target - vol)
+               if (.not. keep) then
+                  sieve_done = .true.
+                  exit
+               end if
+               call add_particle(k, at(b)%c, at(b)%r, sc)
+               vol = vol + v
+               model%count(s) = model%count(s) + 1
+               if (cfg%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
+                                                            + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
+               if (vol >= target) exit
+            end do
+            deallocate (at)
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
                write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", s, ": placed ", model%count(s), &
@@ -230,24 +262,28 @@ contains
          end do
       end function random_centre
 
-      !> No overlap with the walls (non-periodic) or any parked particle, as the shell mode says.
-      logical function fits(kn, x, rr, s_) result(ok)
-         integer, intent(in) :: kn
+      !> No overlap with the walls (non-periodic) or any parked particle with index > jmin, as the
+      !> shell mode says. `cnd` and `shf` are the caller's scratch (one per thread).
+      logical function fits(kn, x, rr, s_, jmin, cnd, shf) result(ok)
+         integer, intent(in) :: kn, jmin
          real(wp), intent(in) :: x(3), rr(3, 3), s_
+         integer, allocatable, intent(inout) :: cnd(:)
+         real(wp), allocatable, intent(inout) :: shf(:, :)
          integer :: i, j, ncand
          real(wp) :: xj(3)
          ok = .false.
-         if (.not. cfg%periodic) then
+         if (.not. cfg%periodic .and. jmin == 0) then
             if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
                if (body_crosses_walls(kinds(kn)%shell_body, x, rr, s_, cfg%box)) return
             else
                if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box)) return
             end if
          end if
-         call cl%query(x, s_ * kinds(kn)%r_out, center, rho, cand, cand_shift, ncand)
+         call cl%query(x, s_ * kinds(kn)%r_out, center, rho, cnd, shf, ncand)
          do i = 1, ncand
-            j = cand(i)
-            xj = center(:, j) + cand_shift(:, i)
+            j = cnd(i)
+            if (j <= jmin) cycle
+            xj = center(:, j) + shf(:, i)
             associate (kj => kinds(kind_of(j)))
                if (cfg%nlayer == 0 .or. cfg%mode == shell_mode%overlap) then
                   if (bodies_overlap(kinds(kn)%body, x, rr, s_, kj%body, xj, rot(:, :, j), scale(j), params)) return
@@ -262,6 +298,57 @@ contains
          end do
          ok = .true.
       end function fits
+
+      !> Advance an attempt sequence by one attempt (or mark it done).
+      subroutine next_attempt(a, sv)
+         type(attempt_type), intent(inout) :: a
+         integer, intent(in) :: sv
+         if (a%done) return
+         if (a%is > 0 .and. a%il < cfg%max_locations) then
+            a%il = a%il + 1
+         else if (a%is > 0 .and. a%io < cfg%max_orientations) then
+            a%io = a%io + 1
+            a%il = 1
+            a%r = random_rotation(a%rng)
+         else if (a%is > 0 .and. a%iz < cfg%max_sizes) then
+            a%iz = a%iz + 1
+            call new_size(a, sv)
+            a%io = 1
+            a%il = 1
+            a%r = random_rotation(a%rng)
+         else if (a%is < cfg%max_shapes) then
+            a%is = a%is + 1
+            ! kinds of a sieve: nlev blocks (width levels) of its shapes
+            a%kk = first_kind(sv) + a%rng%below(nkind_sieve(sv) / nlev) - 1
+            a%iz = 1
+            call new_size(a, sv)
+            a%io = 1
+            a%il = 1
+            a%r = random_rotation(a%rng)
+         else
+            a%done = .true.
+            a%count = a%count + 1
+            return
+         end if
+         a%c = random_centre(a%rng, a%sc * kinds(a%k)%body%r_min)
+         a%count = a%count + 1
+      end subroutine next_attempt
+
+      !> Draw a new width (and width level) for the current shape of an attempt sequence.
+      subroutine new_size(a, sv)
+         type(attempt_type), intent(inout) :: a
+         integer, intent(in) :: sv
+         integer :: lev
+         if (nlev > 1) then
+            lev = a%rng%below(width_levels)
+            a%k = a%kk + (lev - 1) * (nkind_sieve(sv) / nlev)
+            a%w = cfg%min_width(sv) + (lev - 0.5_wp) * (cfg%max_width(sv) - cfg%min_width(sv)) / width_levels
+         else
+            a%k = a%kk
+            a%w = a%rng%uniform_range(cfg%min_width(sv), cfg%max_width(sv))
+         end if
+         a%sc = a%w / kinds(a%k)%width
+      end subroutine new_size
 
       subroutine add_particle(kn, x, rr, s_)
          integer, intent(in) :: kn
