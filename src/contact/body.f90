@@ -2,10 +2,13 @@
 !> angular patches, guaranteed bounding radii and extent boxes.
 !>
 !> Patches are latitude-longitude rectangles. Level l has nt = 4 2^l rows in theta and
-!> np = 8 2^l columns in phi; levels 0..`leaf_level` are stored, finer levels are generated on the
-!> fly by the contact test (same indexing). Each stored patch carries a cap (centre direction,
-!> half-angle alpha) that contains it, certified r_min <= r <= r_max over the patch, and a ball
-!> that contains the solid shell sector {rho u : u in cap, r_min <= rho <= r_max}.
+!> np = 8 2^l columns in phi (square patches of pi/nt rad). Levels 0..`leaf_level` store per
+!> patch a cap (centre direction, half-angle alpha) that contains it, certified
+!> r_min <= r <= r_max over the patch, and a ball that contains the solid shell sector
+!> {rho u : u in cap, r_min <= rho <= r_max}. Levels leaf_level+1..`stored_level` store only the
+!> certified bounds (single precision, rounded outwards); their caps come from per-row and
+!> per-column tables (`patch_geometry`). Finer levels are generated on the fly by the contact test
+!> (same indexing) with the local bound of `slope_bound`.
 !>
 !> Certification (docs/contact.md). r is sampled with its gradient on the regular grid
 !> theta_i = i pi/nt_g, phi_j = 2 pi j/np_g (nt_g = 8 nt_leaf, np_g = 8 np_leaf). The restriction
@@ -22,7 +25,7 @@
 !>     call new_contact_body(body, shape, error, nused=14)
 !>     ! body%r_max, body%box_lo/box_hi (certified), body%ext_lo/ext_hi (thesis N_ext scan)
 module anm_contact_body
-   use anm_core_kinds, only: wp, pi, two_pi
+   use anm_core_kinds, only: wp, sp, pi, two_pi
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
@@ -31,11 +34,13 @@ module anm_contact_body
    implicit none
    private
 
-   public :: contact_body_type, new_contact_body, leaf_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next
+   public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
    integer, parameter :: leaf_level = 4
+   !> Finest level with stored bounds (256 x 512 patches of pi/256 rad, 2 x 2 certification cells).
+   integer, parameter :: stored_level = 6
    !> Grid cells per leaf patch edge used to certify the bounds.
    integer, parameter :: cells_per_leaf = 8
    !> Thesis default N_ext.
@@ -72,6 +77,17 @@ module anm_contact_body
       real(wp), allocatable :: rlo(:), rhi(:)
       !> Ball containing the shell sector: centre (3, npatch) and radius.
       real(wp), allocatable :: ball(:, :), brad(:)
+      !> Offset of level l (leaf_level < l <= stored_level) in dlo/dhi.
+      integer :: doff(leaf_level + 1:stored_level + 1) = 0
+      !> Certified bounds of r over the patches of levels leaf_level+1..stored_level, rounded
+      !> outwards to single precision (patch (l, i, j) at doff(l) + (j - 1) patch_rows(l) + i).
+      real(sp), allocatable :: dlo(:), dhi(:)
+      !> Offsets of level l (0..stored_level) in the row and column tables.
+      integer :: roff(0:stored_level) = 0, coff(0:stored_level) = 0
+      !> Per patch row: cos and sin of the mid polar angle, cos and sin of the cap half-angle.
+      real(wp), allocatable :: row_ct(:), row_st(:), row_cosa(:), row_sina(:)
+      !> Per patch column: cos and sin of the mid azimuth.
+      real(wp), allocatable :: col_cp(:), col_sp(:)
    end type contact_body_type
 
 contains
@@ -101,6 +117,59 @@ contains
       integer :: k
       k = body%off(l) + (j - 1) * patch_rows(l) + i
    end function patch_index
+
+   !> Cap of patch (l, i, j), l <= stored_level, from the row and column tables (no trigonometry).
+   pure subroutine patch_geometry(body, l, i, j, dir, cosa, sina)
+      !> Body.
+      type(contact_body_type), intent(in) :: body
+      !> Level (<= stored_level), row, column.
+      integer, intent(in) :: l, i, j
+      !> Cap centre direction.
+      real(wp), intent(out) :: dir(3)
+      !> cos and sin of the cap half-angle.
+      real(wp), intent(out) :: cosa, sina
+      integer :: kr, kc
+      kr = body%roff(l) + i
+      kc = body%coff(l) + j
+      dir = [body%row_st(kr) * body%col_cp(kc), body%row_st(kr) * body%col_sp(kc), body%row_ct(kr)]
+      cosa = body%row_cosa(kr)
+      sina = body%row_sina(kr)
+   end subroutine patch_geometry
+
+   !> Certified bounds of r over patch (l, i, j), l <= stored_level.
+   pure subroutine patch_bounds(body, l, i, j, rlo, rhi)
+      !> Body.
+      type(contact_body_type), intent(in) :: body
+      !> Level (<= stored_level), row, column.
+      integer, intent(in) :: l, i, j
+      !> Lower and upper bound of r over the patch.
+      real(wp), intent(out) :: rlo, rhi
+      integer :: k
+      if (l <= leaf_level) then
+         k = body%off(l) + (j - 1) * patch_rows(l) + i
+         rlo = body%rlo(k)
+         rhi = body%rhi(k)
+      else
+         k = body%doff(l) + (j - 1) * patch_rows(l) + i
+         rlo = real(body%dlo(k), wp)
+         rhi = real(body%dhi(k), wp)
+      end if
+   end subroutine patch_bounds
+
+   !> Local bound of r over the cap of half-angle alpha around a direction u0 where r = r0 and
+   !> |grad r| = g0 (from `radius_slope`): |r(u) - r0| <= g0 alpha + H alpha^2/2, by Taylor's
+   !> theorem along the great-circle arc from u0 to u (length <= alpha) with the certified curvature
+   !> bound H = N^2 M. `sin0` = sin(theta(u0)) sets the rounding margin of g0.
+   pure function slope_bound(body, g0, alpha, sin0) result(w)
+      !> Body.
+      type(contact_body_type), intent(in) :: body
+      !> |grad r| at the cap centre, cap half-angle (rad), sin of the centre's polar angle.
+      real(wp), intent(in) :: g0, alpha, sin0
+      real(wp) :: w
+      real(wp) :: gm
+      gm = g0 * (1.0_wp + 1.0e-12_wp) + 1.0e-14_wp * (body%nmax + 1)**2 * body%r_max / max(sin0, 1.0e-300_wp)
+      w = (gm * alpha + 0.5_wp * body%curvature * alpha**2) * (1.0_wp + 1.0e-12_wp) + 1.0e-14_wp * body%r_max
+   end function slope_bound
 
    !> Cap containing the rectangle [th0, th1] x [ph0, ph1] (ph1 - ph0 <= pi/2): centre direction
    !> at the mid angles, half-angle the largest angle to a corner (along edges of such rectangles
@@ -164,8 +233,8 @@ contains
       !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
       integer, intent(in), optional :: next
       real(wp), allocatable :: rg(:, :), gg(:, :), clo(:, :), chi(:, :)
-      integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc
-      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu
+      integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc, nd
+      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu, d3(3)
       real(wp) :: e(3)
 
       if (present(nused)) then
@@ -213,6 +282,46 @@ contains
                      rg(ic - 1, jc) - gg(ic - 1, jc) * dc, rg(ic, jc) - gg(ic, jc) * dc)
             chi(ic, jc) = hi + 0.5_wp * body%curvature * dc**2
             clo(ic, jc) = lo - 0.5_wp * body%curvature * dc**2
+         end do
+      end do
+      ! deep levels: bounds only, rounded outwards to single precision
+      nd = 0
+      do l = leaf_level + 1, stored_level
+         body%doff(l) = nd
+         nd = nd + patch_rows(l) * patch_cols(l)
+      end do
+      body%doff(stored_level + 1) = nd
+      allocate (body%dlo(nd), body%dhi(nd))
+      do l = leaf_level + 1, stored_level
+         kc = cells_per_leaf / 2**(l - leaf_level)
+         do j = 1, patch_cols(l)
+            do i = 1, patch_rows(l)
+               k = body%doff(l) + (j - 1) * patch_rows(l) + i
+               lo = minval(clo((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+               hi = maxval(chi((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+               body%dlo(k) = real(lo, sp)
+               if (real(body%dlo(k), wp) > lo) body%dlo(k) = nearest(body%dlo(k), -1.0_sp)
+               body%dhi(k) = real(hi, sp)
+               if (real(body%dhi(k), wp) < hi) body%dhi(k) = nearest(body%dhi(k), 1.0_sp)
+            end do
+         end do
+      end do
+      ! row and column tables of every stored level
+      allocate (body%row_ct(4 * (2**(stored_level + 1) - 1)), body%row_st(4 * (2**(stored_level + 1) - 1)), &
+                body%row_cosa(4 * (2**(stored_level + 1) - 1)), body%row_sina(4 * (2**(stored_level + 1) - 1)), &
+                body%col_cp(8 * (2**(stored_level + 1) - 1)), body%col_sp(8 * (2**(stored_level + 1) - 1)))
+      do l = 0, stored_level
+         body%roff(l) = 4 * (2**l - 1)
+         body%coff(l) = 8 * (2**l - 1)
+         do i = 1, patch_rows(l)
+            call patch_cap(pi * (i - 1) / patch_rows(l), pi * i / patch_rows(l), 0.0_wp, two_pi / patch_cols(l), &
+                           d3, body%row_cosa(body%roff(l) + i), body%row_sina(body%roff(l) + i))
+            body%row_ct(body%roff(l) + i) = cos(pi * (i - 0.5_wp) / patch_rows(l))
+            body%row_st(body%roff(l) + i) = sin(pi * (i - 0.5_wp) / patch_rows(l))
+         end do
+         do j = 1, patch_cols(l)
+            body%col_cp(body%coff(l) + j) = cos(two_pi * (j - 0.5_wp) / patch_cols(l))
+            body%col_sp(body%coff(l) + j) = sin(two_pi * (j - 0.5_wp) / patch_cols(l))
          end do
       end do
       ! patch storage

@@ -7,16 +7,22 @@
 !>  3. extent boxes in the world and their intersection, the EOB (empty -> no contact);
 !>  4. for each body, its surface is tested against the other body through the patch hierarchy:
 !>     a patch whose shell-sector ball misses the EOB, or whose ball lies certainly outside the
-!>     other body (the other body's certified r over the ball's cap of directions), is pruned; a
-!>     ball certainly inside means contact; undecided leaf patches are scanned at N_box
-!>     resolution (default mode) or subdivided with certified bounds (certified mode). Both bodies
-!>     are scanned (a thin protrusion of B into A is invisible from A's surface alone).
+!>     other body, is pruned; a ball certainly inside means contact. The other body's r over the
+!>     ball's cap of directions is bounded by its stored patch bounds over the index rectangle
+!>     that covers the cap (`classify_ball`, no search), and, when these do not decide and the cap
+!>     is small, by the local bound r(u0) +- (|grad r(u0)| beta + H beta^2/2) at the cap centre.
+!>     Undecided patches of the finest stored level (pi/256 rad) are scanned at N_box resolution
+!>     (default mode) or subdivided with local bounds (certified mode). Both bodies are scanned
+!>     (a thin protrusion of B into A is invisible from A's surface alone).
 !> Each scanned surface point is tested against the other body along the ray to its centre.
 !>
 !> Certified mode: "no contact" is returned only when every patch was proven outside, so it is
-!> guaranteed (up to floating-point rounding); a pair still undecided when the patch size reaches
-!> `resolution` radians is reported as contact (possible false positive for gaps smaller than
-!> about (G_a s_a + G_b s_b + r_max s) * resolution, G the certified Lipschitz bound).
+!> guaranteed (up to floating-point rounding). Undecided patches are subdivided; their centre
+!> surface point p is tested against the other body along the ray to its centre: inside means
+!> contact, and a radial distance to the other surface below `gap` x L (L the smaller body's
+!> certified extent, see `contact_params_type`) also reports contact, so a reported contact
+!> between non-overlapping bodies implies a surface gap below gap x L. Patches still undecided at
+!> `resolution` (a floor never reached in our tests) are reported as contact too.
 !>
 !> Newton-Raphson method (thesis Eq 1.5, legacy baseline): phi_1 is fixed on `nr_lines` values;
 !> the remaining unknowns are eliminated by measuring the surface point of A along the ray from
@@ -31,8 +37,8 @@
 !>     out = body_crosses_walls(body_a, ca, rot_a, sa, [lx, ly, lz])
 module anm_contact_overlap
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_contact_body, only: contact_body_type, leaf_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next
+   use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
    implicit none
    private
 
@@ -61,10 +67,13 @@ module anm_contact_overlap
       integer :: nbox = 128
       !> Certified mode: "no contact" guaranteed (patch bounds, subdivision to `resolution`).
       logical :: certified = .false.
-      !> Certified mode: patch size (radians) at which an undecided patch is reported as contact.
-      !> The default is the stored leaf size pi/64; finer values subdivide with the global Lipschitz
-      !> bound (cost grows like 1/resolution near contact).
-      real(wp) :: resolution = pi / 64.0_wp
+      !> Certified mode: relative gap resolution. Contact may be reported for bodies that do not
+      !> overlap only when their surfaces are closer than gap x L, L = min over the two bodies of
+      !> scale x the largest edge of the certified body-frame extent box (about the particle length).
+      real(wp) :: gap = 1.0e-3_wp
+      !> Certified mode: patch size (radians) at which an undecided patch is reported as contact
+      !> whatever its gap (a safety floor for the subdivision).
+      real(wp) :: resolution = pi / 65536.0_wp
       !> Newton-Raphson: number of fixed phi_1 values.
       integer :: nr_lines = 36
       !> Newton-Raphson: starting theta_1 values per line.
@@ -84,6 +93,8 @@ module anm_contact_overlap
    end type pose_type
 
    integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
+   !> Finest patch level of the wall test (pi/1024 rad; levels beyond stored_level use local bounds).
+   integer, parameter :: wall_level = stored_level + 2
 
 contains
 
@@ -108,7 +119,7 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
-      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3)
+      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), tol
       type(pose_type) :: pab, pba
       logical :: found
 
@@ -145,10 +156,12 @@ contains
       ! stage 4: surface of A against B, then surface of B against A
       pab = make_pose(center_a, rot_a, scale_a, center_b, rot_b, scale_b)
       pba = make_pose(center_b, rot_b, scale_b, center_a, rot_a, scale_a)
+      tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
+                             scale_b * maxval(body_b%box_hi - body_b%box_lo))
       hit = .true.
-      call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, params, found)
+      call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, params, tol / scale_b, found)
       if (found) return
-      call probe_surface(body_b, body_a, pba, eob_lo, eob_hi, params, found)
+      call probe_surface(body_b, body_a, pba, eob_lo, eob_hi, params, tol / scale_a, found)
       if (found) return
       hit = .false.
    end function bodies_overlap
@@ -205,8 +218,8 @@ contains
    end function overlap_depth
 
    !> True if any part of the posed body touches or leaves the box [0, L]^3. "False" is
-   !> guaranteed by the certified patch bounds: leaf patches still undecided are reported as
-   !> touching (a possible false positive within the leaf bound width of the wall).
+   !> guaranteed by the certified patch bounds: patches still undecided at `wall_level` are reported
+   !> as touching (a possible false positive within their bound width of the wall).
    pure logical function body_crosses_walls(body, center, rot, scale, box_length) result(out)
       !> Body.
       type(contact_body_type), intent(in) :: body
@@ -324,14 +337,16 @@ contains
       ph1 = two_pi * j / patch_cols(l)
    end subroutine patch_rect
 
-   !> Cap, radial bounds and sector ball of patch (l, i, j): stored for l <= leaf_level, otherwise
-   !> from r at the cap centre and the Lipschitz bound, intersected with the parent's bounds.
+   !> Cap, radial bounds and sector ball of patch (l, i, j): stored for l <= stored_level (caps
+   !> of levels beyond leaf_level from the row/column tables), otherwise from r and |grad r| at the
+   !> cap centre with `slope_bound` (r0 = r there, else r0 = -1); always intersected with the
+   !> parent's bounds [plo, phi].
    pure subroutine patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
       type(contact_body_type), intent(in) :: a
       integer, intent(in) :: l, i, j
       real(wp), intent(in) :: plo, phi
       real(wp), intent(out) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0
-      real(wp) :: th0, th1, ph0, ph1, alpha
+      real(wp) :: th0, th1, ph0, ph1, g0, w
       integer :: k
       if (l <= leaf_level) then
          k = patch_index(a, l, i, j)
@@ -343,29 +358,46 @@ contains
          cen = a%ball(:, k)
          rad = a%brad(k)
          r0 = -1.0_wp
+         return
+      end if
+      if (l <= stored_level) then
+         call patch_geometry(a, l, i, j, dir, cosa, sina)
+         call patch_bounds(a, l, i, j, rlo, rhi)
+         r0 = -1.0_wp
       else
          call patch_rect(l, i, j, th0, th1, ph0, ph1)
          call patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
-         alpha = atan2(sina, cosa)
-         r0 = a%shape%radius_dir(dir)
-         rlo = max(plo, r0 - a%lipschitz * alpha)
-         rhi = min(phi, r0 + a%lipschitz * alpha)
-         call sector_ball(dir, cosa, sina, rlo, rhi, cen, rad)
+         call a%shape%radius_slope(dir, r0, g0)
+         w = slope_bound(a, g0, atan2(sina, cosa), sqrt(dir(1)**2 + dir(2)**2))
+         rlo = r0 - w
+         rhi = r0 + w
       end if
+      rlo = max(rlo, plo)
+      rhi = min(rhi, phi)
+      call sector_ball(dir, cosa, sina, rlo, rhi, cen, rad)
    end subroutine patch_data
 
    !> Classify the ball (centre y in B's frame, radius rho) against B: outside, inside or mixed.
+   !> The ball's points have directions within beta = asin(rho/|y|) of u = y/|y| and radii in
+   !> [|y| - rho, |y| + rho]; it is outside (inside) when B's r over that cap is certainly below
+   !> (above) that range. B's r is bounded by its stored patch bounds over the index rectangle that
+   !> covers the cap (`cap_bounds`) and, when these do not decide and beta is small, by the local
+   !> bound at u (`slope_bound`).
    pure function classify_ball(b, y, rho) result(code)
       type(contact_body_type), intent(in) :: b
       real(wp), intent(in) :: y(3), rho
       integer :: code
-      real(wp) :: d, lo, hi, u(3), sinb, cosb, beta, r0
-      integer :: i, j
+      real(wp), parameter :: beta_local = 0.02_wp
+      real(wp) :: d, lo, hi, u(3), sinb, beta, r0, g0, w
       d = sqrt(sum(y**2))
       lo = d - rho
       hi = d + rho
       if (lo > b%r_max) then
          code = code_outside
+         return
+      end if
+      if (hi < b%r_min) then
+         code = code_inside
          return
       end if
       if (d <= rho) then
@@ -374,68 +406,125 @@ contains
       end if
       u = y / d
       sinb = rho / d
-      cosb = sqrt(max(0.0_wp, 1.0_wp - sinb**2))
       beta = asin(min(1.0_wp, sinb))
-      if (beta < 0.05_wp) then
-         r0 = b%shape%radius_dir(u)
-         if (r0 + b%lipschitz * beta < lo) then
+      code = cap_bounds(b, u, sinb, beta, lo, hi)
+      if (code /= code_mixed .or. beta > beta_local) return
+      if (u(1)**2 + u(2)**2 <= 1.0e-20_wp) return
+      call b%shape%radius_slope(u, r0, g0)
+      w = slope_bound(b, g0, beta, sqrt(u(1)**2 + u(2)**2))
+      if (r0 + w < lo) then
+         code = code_outside
+      else if (r0 - w > hi) then
+         code = code_inside
+      end if
+   end function classify_ball
+
+   !> Stored bounds of B's r over the cap (u, beta) against the radial range [lo, hi]: the patches
+   !> of one level whose index rectangle covers the polar range theta(u) +- beta and the azimuth
+   !> range phi(u) +- asin(sin beta / sin theta(u)) (all azimuths when the cap holds a pole). The
+   !> level is the finest stored one with patches of at least beta (coarser when near a pole the
+   !> rectangle would be large); a mixed answer is retried once on the next finer level.
+   pure function cap_bounds(b, u, sinb, beta, lo, hi) result(code)
+      type(contact_body_type), intent(in) :: b
+      real(wp), intent(in) :: u(3), sinb, beta, lo, hi
+      integer :: code
+      integer, parameter :: max_count = 36
+      real(wp), parameter :: eps = 1.0e-12_wp
+      real(wp) :: th, ph, st, t0, t1, dph, rlo, rhi
+      logical :: polar, all_out, all_in
+      integer :: l, l0, i0, i1, j0, j1, i, j, jj, ncol, pass
+      st = sqrt(u(1)**2 + u(2)**2)
+      th = atan2(st, u(3))
+      ph = atan2(u(2), u(1))
+      if (ph < 0.0_wp) ph = ph + two_pi
+      t0 = th - beta - eps
+      t1 = th + beta + eps
+      polar = t0 <= 0.0_wp .or. t1 >= pi
+      dph = pi
+      if (.not. polar) then
+         if (sinb < st) dph = asin(sinb / st) + eps
+      end if
+      ! finest level whose patch size pi / (4 2^l) is at least beta
+      if (beta > 0.0_wp) then
+         l0 = max(0, min(stored_level, exponent(pi / (4.0_wp * beta)) - 1))
+      else
+         l0 = stored_level
+      end if
+      do l = l0, 0, -1
+         call cover(l, i0, i1, j0, j1, ncol)
+         if ((i1 - i0 + 1) * ncol <= max_count .or. l == 0) exit
+      end do
+      code = code_mixed
+      do pass = 1, 2
+         all_out = .true.
+         all_in = .true.
+         outer: do j = j0, j0 + ncol - 1
+            jj = modulo(j - 1, patch_cols(l)) + 1
+            do i = i0, i1
+               call patch_bounds(b, l, i, jj, rlo, rhi)
+               if (rhi >= lo) all_out = .false.
+               if (rlo <= hi) all_in = .false.
+               if (.not. (all_out .or. all_in)) exit outer
+            end do
+         end do outer
+         if (all_out) then
             code = code_outside
             return
-         else if (r0 - b%lipschitz * beta > hi) then
+         else if (all_in) then
             code = code_inside
             return
          end if
-      end if
-      code = code_none
-      do j = 1, patch_cols(0)
-         do i = 1, patch_rows(0)
-            call classify_patch(b, 0, i, j, u, cosb, sinb, lo, hi, code)
-            if (code == code_mixed) return
-         end do
+         if (l >= stored_level) return
+         l = l + 1
+         call cover(l, i0, i1, j0, j1, ncol)
+         if ((i1 - i0 + 1) * ncol > 4 * max_count) return
       end do
-      if (code == code_none) code = code_mixed
-   end function classify_ball
+   contains
+      pure subroutine cover(lev, ia, ib, ja, jb, nc)
+         integer, intent(in) :: lev
+         integer, intent(out) :: ia, ib, ja, jb, nc
+         real(wp) :: h
+         h = pi / patch_rows(lev)
+         ia = max(1, floor(t0 / h) + 1)
+         ib = min(patch_rows(lev), floor(t1 / h) + 1)
+         if (dph >= pi) then
+            ja = 1
+            jb = patch_cols(lev)
+         else
+            ja = floor((ph - dph) / h) + 1
+            jb = floor((ph + dph) / h) + 1
+         end if
+         nc = min(jb - ja + 1, patch_cols(lev))
+      end subroutine cover
+   end function cap_bounds
 
-   pure recursive subroutine classify_patch(b, l, i, j, u, cosb, sinb, lo, hi, code)
+   !> Radial gap (B units) of the A-frame point p to B's surface along the ray from B's centre:
+   !> negative when p is inside B.
+   pure function radial_gap(b, ps, p) result(g)
       type(contact_body_type), intent(in) :: b
-      integer, intent(in) :: l, i, j
-      real(wp), intent(in) :: u(3), cosb, sinb, lo, hi
-      integer, intent(inout) :: code
-      integer :: k, c, di, dj
-      k = patch_index(b, l, i, j)
-      ! cap intersection: angle(dir, u) <= alpha + beta
-      ! (alpha < pi/2 for every patch and beta < pi/2, so alpha + beta < pi)
-      if (dot_product(b%dir(:, k), u) < b%cosa(k) * cosb - b%sina(k) * sinb) return
-      if (b%rhi(k) < lo) then
-         c = code_outside
-      else if (b%rlo(k) > hi) then
-         c = code_inside
-      else if (l == leaf_level) then
-         c = code_mixed
+      type(pose_type), intent(in) :: ps
+      real(wp), intent(in) :: p(3)
+      real(wp) :: g
+      real(wp) :: y(3), d
+      y = matmul(ps%m, p) + ps%t
+      d = sqrt(sum(y**2))
+      if (d <= 0.0_wp) then
+         g = -b%r_min
       else
-         do dj = 0, 1
-            do di = 0, 1
-               call classify_patch(b, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, u, cosb, sinb, lo, hi, code)
-               if (code == code_mixed) return
-            end do
-         end do
-         return
+         g = d - b%shape%radius_dir(y)
       end if
-      if (code == code_none) then
-         code = c
-      else if (code /= c) then
-         code = code_mixed
-      end if
-   end subroutine classify_patch
+   end function radial_gap
 
-   pure subroutine probe_surface(a, b, ps, eob_lo, eob_hi, params, found)
+   pure subroutine probe_surface(a, b, ps, eob_lo, eob_hi, params, tol, found)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: ps
       real(wp), intent(in) :: eob_lo(3), eob_hi(3)
       type(contact_params_type), intent(in) :: params
+      !> Certified mode: radial gap tolerance in B units.
+      real(wp), intent(in) :: tol
       logical, intent(out) :: found
       integer :: i, j, stop_level
-      stop_level = leaf_level
+      stop_level = stored_level
       if (params%certified) then
          do while (pi / patch_rows(stop_level) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. stop_level < 24)
             stop_level = stop_level + 1
@@ -444,16 +533,17 @@ contains
       found = .false.
       do j = 1, patch_cols(0)
          do i = 1, patch_rows(0)
-            call probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, 0, i, j, a%r_min, a%r_max, found)
+            call probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, 0, i, j, a%r_min, a%r_max, found)
             if (found) return
          end do
       end do
    end subroutine probe_surface
 
-   pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, l, i, j, plo, phi, found)
+   pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, l, i, j, plo, phi, &
+                                         found)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: ps
-      real(wp), intent(in) :: eob_lo(3), eob_hi(3)
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3), tol
       type(contact_params_type), intent(in) :: params
       integer, intent(in) :: stop_level, l, i, j
       real(wp), intent(in) :: plo, phi
@@ -462,13 +552,6 @@ contains
       integer :: code, di, dj
 
       call patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
-      if (r0 > 0.0_wp) then
-         ! on-the-fly patch: its centre surface point is a scan point
-         if (point_inside(b, ps%m, ps%t, r0 * dir)) then
-            found = .true.
-            return
-         end if
-      end if
       if (.not. ball_in_box(ps%cw + matmul(ps%rw, cen), rad * sqrt(sum(ps%rw(:, 1)**2)), eob_lo, eob_hi)) return
       code = classify_ball(b, matmul(ps%m, cen) + ps%t, ps%k * rad)
       if (code == code_outside) return
@@ -476,17 +559,28 @@ contains
          found = .true.
          return
       end if
+      if (r0 > 0.0_wp) then
+         ! on-the-fly patch (certified mode): its centre surface point decides contact when it is
+         ! inside B or within the gap tolerance of B's surface
+         if (radial_gap(b, ps, r0 * dir) <= tol) then
+            found = .true.
+            return
+         end if
+      end if
       if (l >= stop_level) then
-         ! undecided at the finest level: scan at N_box; certified mode then reports contact
-         call patch_rect(l, i, j, th0, th1, ph0, ph1)
-         call scan_rect(a, b, ps, eob_lo, eob_hi, params%nbox, th0, th1, ph0, ph1, found)
-         if (params%certified) found = .true.
+         if (params%certified) then
+            found = .true.
+         else
+            ! undecided at the finest stored level: scan at N_box
+            call patch_rect(l, i, j, th0, th1, ph0, ph1)
+            call scan_rect(a, b, ps, eob_lo, eob_hi, params%nbox, th0, th1, ph0, ph1, found)
+         end if
          return
       end if
       do dj = 0, 1
          do di = 0, 1
-            call probe_patch(a, b, ps, eob_lo, eob_hi, params, stop_level, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj, &
-                             rlo, rhi, found)
+            call probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, l + 1, 2 * i - 1 + di, &
+                             2 * j - 1 + dj, rlo, rhi, found)
             if (found) return
          end do
       end do
@@ -579,7 +673,9 @@ contains
       end do
    end subroutine depth_patch
 
-   !> Support test against a wall: code_inside when some body point has y.e >= thr.
+   !> Support test against a wall: code_inside when some body point may have y.e >= thr. Patches
+   !> are refined down to `wall_level` (stored bounds, then local bounds); a patch still undecided
+   !> there is reported as touching.
    pure recursive subroutine wall_patch(a, e, thr, l, i, j, plo, phi, code)
       type(contact_body_type), intent(in) :: a
       real(wp), intent(in) :: e(3), thr, plo, phi
@@ -607,7 +703,7 @@ contains
       end if
       ub = min(ub, dot_product(cen, e) + rad)
       if (ub < thr) return
-      if (l >= leaf_level) then
+      if (l >= wall_level) then
          code = code_inside
          return
       end if

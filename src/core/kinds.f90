@@ -8,10 +8,12 @@ module anm_core_kinds
    implicit none
    private
 
-   public :: wp, i4, i8, pi, two_pi, four_pi
+   public :: wp, sp, i4, i8, pi, two_pi, four_pi
 
    !> Working precision: IEEE double.
    integer, parameter :: wp = selected_real_kind(15)
+   !> Single precision (compact storage of outward-rounded bounds).
+   integer, parameter :: sp = selected_real_kind(6)
    !> 32-bit integer kind.
    integer, parameter :: i4 = int32
    !> 64-bit integer kind (random number generator state, large counts).

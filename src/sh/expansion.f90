@@ -43,6 +43,8 @@ module anm_sh_expansion
       procedure :: radius
       !> r and its angular derivatives at (theta, phi).
       procedure :: point
+      !> r and the norm of its surface gradient along a unit direction (no allocation).
+      procedure :: radius_slope
       !> Mean radius a_00 / (2 sqrt(pi)).
       procedure :: mean_radius
    end type sh_expansion_type
@@ -212,6 +214,74 @@ contains
          r = r + acc_a * cm + acc_b * sm
       end do
    end function radius_xs
+
+   !> r and |grad r| = sqrt(r_theta^2 + r_phi_sin^2) along the direction u (body frame, need not be
+   !> normalised) by one fused column recursion per order, without allocation. The theta
+   !> derivative uses sin(theta) dPbar_n^m/dtheta = n x Pbar_n^m - f_nm Pbar_{n-1}^m with
+   !> f_nm = (2n+1)/ca, so u must not be a pole (sin(theta) > 0); the relative rounding error grows
+   !> like epsilon/sin(theta).
+   pure subroutine radius_slope(self, u, r, slope)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Direction, not along the z axis.
+      real(wp), intent(in) :: u(3)
+      !> r(u).
+      real(wp), intent(out) :: r
+      !> |grad r| at u (per radian).
+      real(wp), intent(out) :: slope
+      real(wp) :: rho, len, x, s, cp, sp, pmm, v0, v1, v2, cm, sm, cnew, acc_a, acc_b, dt_a, dt_b, rt, rp
+      integer :: m, n, k0, nmax
+      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+
+      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
+      rho = sqrt(u(1)**2 + u(2)**2)
+      x = u(3) / len
+      s = rho / len
+      cp = u(1) / rho
+      sp = u(2) / rho
+      nmax = self%nmax
+      pmm = inv_sqrt_4pi
+      cm = 1.0_wp
+      sm = 0.0_wp
+      r = 0.0_wp
+      rt = 0.0_wp
+      rp = 0.0_wp
+      do m = 0, nmax
+         if (m > 0) then
+            pmm = -self%table%sect(m) * s * pmm
+            if (abs(pmm) < 1.0e-250_wp) exit
+            cnew = cm * cp - sm * sp
+            sm = sm * cp + cm * sp
+            cm = cnew
+         end if
+         k0 = self%table%idx(m)
+         v1 = pmm
+         acc_a = self%a(m, m) * v1
+         acc_b = self%b(m, m) * v1
+         ! sin(theta) dPbar_m^m/dtheta = m x Pbar_m^m
+         dt_a = self%a(m, m) * (m * x * v1)
+         dt_b = self%b(m, m) * (m * x * v1)
+         v0 = 0.0_wp
+         do n = m + 1, nmax
+            if (n == m + 1) then
+               v2 = self%table%ca(k0 + 1) * x * v1
+            else
+               v2 = self%table%ca(k0 + n - m) * x * v1 - self%table%cb(k0 + n - m) * v0
+            end if
+            v0 = v1
+            v1 = v2
+            acc_a = acc_a + self%a(n, m) * v1
+            acc_b = acc_b + self%b(n, m) * v1
+            v2 = n * x * v1 - (2 * n + 1) / self%table%ca(k0 + n - m) * v0
+            dt_a = dt_a + self%a(n, m) * v2
+            dt_b = dt_b + self%b(n, m) * v2
+         end do
+         r = r + acc_a * cm + acc_b * sm
+         rt = rt + dt_a * cm + dt_b * sm
+         rp = rp + m * (acc_b * cm - acc_a * sm)
+      end do
+      slope = sqrt(rt**2 + rp**2) / s
+   end subroutine radius_slope
 
    !> r and its angular derivatives at (theta, phi): r_theta = dr/dtheta and
    !> r_phi_sin = (dr/dphi) / sin(theta), the latter finite at the poles.
