@@ -57,8 +57,7 @@ module anm_audit_verify
 contains
 
    !> Audit `model` at `resolution` polar samples; penetrations deeper than `tolerance` mm
-   !> (default 1e-3 of the smallest sieve width, the resolution of the default, non-certified
-   !> contact test of the parking engine) count as overlaps.
+   !> (default 1e-4 of the smallest sieve width) count as overlaps.
    subroutine verify_model(model, resolution, report, tolerance)
       !> Model.
       type(model_type), intent(in) :: model
@@ -81,7 +80,7 @@ contains
       if (present(tolerance)) then
          report%tolerance = tolerance
       else if (allocated(model%min_width)) then
-         report%tolerance = 1.0e-3_wp * minval(model%min_width)
+         report%tolerance = 1.0e-4_wp * minval(model%min_width)
       end if
       ! distinct (shape, order) pairs
       allocate (key(model%np), samp(model%np))

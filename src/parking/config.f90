@@ -67,7 +67,7 @@ module anm_parking_config
       !> N_ext and N_box.
       integer :: n_ext = 40, n_box = 128
       !> Certified contact.
-      logical :: certified = .false.
+      logical :: certified = .true.
       !> Shells: number of layers, cumulative thicknesses, unit ("mm" or "fraction" of length).
       integer :: nlayer = 0
       !> Cumulative thickness of each layer.
