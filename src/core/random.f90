@@ -38,7 +38,7 @@ module anm_core_random
       procedure :: below
    end type rng_type
 
-   integer(i8), parameter :: mask32 = 4294967295_i8
+   integer(i8), parameter :: mask32 = 4294967295_i8, mask16 = 65535_i8
    ! splitmix64 constants 0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB as signed
    integer(i8), parameter :: golden = -7046029254386353131_i8
    integer(i8), parameter :: mix1 = -4658895280553007687_i8
@@ -92,18 +92,27 @@ contains
       c = ior(ishft(iand(hi, mask32), 32), iand(lo, mask32))
    end function wrapping_add
 
-   !> (a * b) modulo 2**64, by shift-and-add (used only for seeding, not in the hot path).
+   !> (a * b) modulo 2**64 on the two's-complement bit patterns, from products of 32- and 16-bit
+   !> limbs that never overflow a signed 64-bit integer.
    elemental function wrapping_mul(a, b) result(c)
       !> Factors.
       integer(i8), intent(in) :: a, b
-      integer(i8) :: c, sh
-      integer :: k
-      c = 0_i8
-      sh = a
-      do k = 0, 63
-         if (btest(b, k)) c = wrapping_add(c, sh)
-         sh = ishft(sh, 1)
-      end do
+      integer(i8) :: c, al, ah, bl, bh, lo, cross
+      al = iand(a, mask32)
+      ah = iand(ishft(a, -32), mask32)
+      bl = iand(b, mask32)
+      bh = iand(ishft(b, -32), mask32)
+      ! al * bl in full (64 bits): split al into 16-bit halves
+      lo = wrapping_add(ishft(ishft(al, -16) * bl, 16), iand(al, mask16) * bl)
+      ! the cross terms only matter modulo 2**32
+      cross = iand(mulmod32(ah, bl) + mulmod32(al, bh), mask32)
+      c = wrapping_add(lo, ishft(cross, 32))
+   contains
+      elemental function mulmod32(x, y) result(z)
+         integer(i8), intent(in) :: x, y
+         integer(i8) :: z
+         z = iand(ishft(iand(ishft(x, -16) * y, mask16), 16) + iand(x, mask16) * y, mask32)
+      end function mulmod32
    end function wrapping_mul
 
    !> Next 64 random bits (xoshiro256**).

@@ -134,11 +134,16 @@ contains
       d0 = norm2(pts(:, ip) - pts(:, iq))
       cand = pack([(i, i=1, size(pts, 2))], rad >= d0 - rmax - 1.0e-12_wp * rmax)
       ncand = size(cand)
+      ! visit candidates by decreasing radius: |p - q| <= |p| + |q|, so once the two radii cannot
+      ! beat the best distance the remaining pairs are skipped (near-spheres end at once)
+      call sort_by_radius(cand, rad)
       dbest = d0**2
       best_p = ip
       best_q = iq
       do i = 1, ncand
+         if ((rad(cand(i)) + rad(cand(min(i + 1, ncand))))**2 <= dbest) exit
          do j = i + 1, ncand
+            if ((rad(cand(i)) + rad(cand(j)))**2 <= dbest) exit
             d2 = (pts(1, cand(i)) - pts(1, cand(j)))**2 + (pts(2, cand(i)) - pts(2, cand(j)))**2 &
                  + (pts(3, cand(i)) - pts(3, cand(j)))**2
             if (d2 > dbest) then
@@ -170,6 +175,46 @@ contains
          f = norm2(shape%radius_dir(uu) * uu - q)
       end function dist_from_q
    end subroutine diameter
+
+   !> Sort indices by decreasing rad(idx) (heap sort, O(n log n)).
+   pure subroutine sort_by_radius(idx, rad)
+      integer, intent(inout) :: idx(:)
+      real(wp), intent(in) :: rad(:)
+      integer :: n, i, tmp
+      n = size(idx)
+      do i = n / 2, 1, -1
+         call sift(idx, rad, i, n)
+      end do
+      do i = n, 2, -1
+         tmp = idx(1)
+         idx(1) = idx(i)
+         idx(i) = tmp
+         call sift(idx, rad, 1, i - 1)
+      end do
+   contains
+      pure subroutine sift(idx, rad, start, last)
+         integer, intent(inout) :: idx(:)
+         real(wp), intent(in) :: rad(:)
+         integer, intent(in) :: start, last
+         integer :: root, child, t
+         root = start
+         do while (2 * root <= last)
+            child = 2 * root
+            ! min-heap on rad gives a decreasing order after the sort
+            if (child < last) then
+               if (rad(idx(child + 1)) < rad(idx(child))) child = child + 1
+            end if
+            if (rad(idx(child)) < rad(idx(root))) then
+               t = idx(root)
+               idx(root) = idx(child)
+               idx(child) = t
+               root = child
+            else
+               return
+            end if
+         end do
+      end subroutine sift
+   end subroutine sort_by_radius
 
    pure function farthest(pts, p) result(k)
       real(wp), intent(in) :: pts(:, :), p(3)

@@ -173,52 +173,64 @@ contains
       real(wp), allocatable, intent(inout) :: shift(:, :)
       !> Number of candidates.
       integer, intent(out) :: ncand
-      integer :: k, lo(3), hi(3), i1, i2, i3, c1, c2, c3, cell, j, s1, s2, s3
-      real(wp) :: reach, d(3), sh(3), lim
-      logical :: all_images
+      integer :: k, lo(3), hi(3), i1, i2, i3, c1, c2, c3, cell, j, s1, s2, s3, d3
+      real(wp) :: reach, d(3), sh(3), lim, half(3)
+      logical :: level_images
       ncand = 0
       if (.not. allocated(cand)) allocate (cand(64), shift(3, 64))
+      half = 0.5_wp * self%box
       do k = 1, size(self%levels)
          associate (lv => self%levels(k))
             if (lv%count == 0) cycle
             reach = rho + lv%rho_max
-            lo = floor((center - reach) / lv%h)
-            hi = floor((center + reach) / lv%h)
-            if (self%periodic) then
-               where (hi - lo + 1 >= lv%n)
-                  lo = 0
-                  hi = lv%n - 1
-               end where
-            else
-               lo = max(0, lo)
-               hi = min(lv%n - 1, hi)
-            end if
+            do d3 = 1, 3
+               lo(d3) = floor((center(d3) - reach) / lv%h(d3))
+               hi(d3) = floor((center(d3) + reach) / lv%h(d3))
+               if (self%periodic) then
+                  if (hi(d3) - lo(d3) + 1 >= lv%n(d3)) then
+                     lo(d3) = 0
+                     hi(d3) = lv%n(d3) - 1
+                  end if
+               else
+                  lo(d3) = max(0, lo(d3))
+                  hi(d3) = min(lv%n(d3) - 1, hi(d3))
+               end if
+            end do
+            ! a particle can meet several images of another only when the two radii exceed half
+            ! an edge; otherwise the nearest image is the only candidate
+            level_images = self%periodic .and. any(2.0_wp * reach > self%box)
             do i3 = lo(3), hi(3)
-               c3 = modulo(i3, lv%n(3))
+               c3 = wrap_index(i3, lv%n(3))
                do i2 = lo(2), hi(2)
-                  c2 = modulo(i2, lv%n(2))
+                  c2 = wrap_index(i2, lv%n(2))
                   do i1 = lo(1), hi(1)
-                     c1 = modulo(i1, lv%n(1))
+                     c1 = wrap_index(i1, lv%n(1))
                      cell = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
                      j = lv%head(cell)
                      do while (j > 0)
                         lim = rho + radii(j)
                         d = centers(:, j) - center
-                        if (self%periodic) then
-                           all_images = any(2.0_wp * lim > self%box)
-                           if (all_images) then
-                              do s3 = -1, 1
-                                 do s2 = -1, 1
-                                    do s1 = -1, 1
-                                       sh = [s1, s2, s3] * self%box
-                                       if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
-                                    end do
+                        if (level_images) then
+                           do s3 = -1, 1
+                              do s2 = -1, 1
+                                 do s1 = -1, 1
+                                    sh = [s1, s2, s3] * self%box
+                                    if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
                                  end do
                               end do
-                           else
-                              sh = -self%box * anint(d / self%box)
-                              if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
-                           end if
+                           end do
+                        else if (self%periodic) then
+                           ! centres lie in the box, so |d| < L: one shift gives the nearest image
+                           do d3 = 1, 3
+                              if (d(d3) > half(d3)) then
+                                 sh(d3) = -self%box(d3)
+                              else if (d(d3) < -half(d3)) then
+                                 sh(d3) = self%box(d3)
+                              else
+                                 sh(d3) = 0.0_wp
+                              end if
+                           end do
+                           if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
                         else
                            if (sum(d**2) < lim * lim) call push(cand, shift, ncand, j, [0.0_wp, 0.0_wp, 0.0_wp])
                         end if
@@ -230,6 +242,19 @@ contains
          end associate
       end do
    end subroutine query
+
+   !> Cell index i wrapped into 0..n-1 (i lies in -n..2n-1 for the ranges used here).
+   elemental integer function wrap_index(i, n) result(c)
+      integer, intent(in) :: i, n
+      c = i
+      if (c < 0) then
+         c = c + n
+         if (c < 0) c = modulo(c, n)
+      else if (c >= n) then
+         c = c - n
+         if (c >= n) c = modulo(c, n)
+      end if
+   end function wrap_index
 
    pure subroutine push(cand, shift, ncand, jj, s)
       integer, allocatable, intent(inout) :: cand(:)

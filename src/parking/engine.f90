@@ -104,7 +104,8 @@ contains
       integer, allocatable :: sieve_of(:), cand(:)
       real(wp) :: vbox, vol, target, v, sc, rho_min
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
-      integer :: s, np, k, b, nstream, nlev, np_frozen, batch
+      integer :: s, np, k, b, nstream, nlev, np_frozen, batch, nthreads, batch_size_now
+      integer(i8) :: batch_attempts
       logical :: keep, sieve_done
       type(attempt_type), allocatable :: at(:)
 
@@ -120,7 +121,7 @@ contains
       vbox = product(cfg%box)
       rho_min = huge(1.0_wp)
       do k = 1, size(kinds)
-         rho_min = min(rho_min, kinds(k)%body%r_min * cfg%min_width(kinds(k)%sieve) / kinds(k)%width)
+         rho_min = min(rho_min, kinds(k)%r_out * cfg%min_width(kinds(k)%sieve) / kinds(k)%width)
       end do
       call new_cell_list(cl, cfg%box, cfg%periodic, rho_min, capacity=4096)
       allocate (center(3, 4096), rot(3, 3, 4096), scale(4096), rho(4096), sieve_of(4096), kind_of(4096))
@@ -130,8 +131,11 @@ contains
       model%achieved_fraction = 0.0_wp
       model%count = 0
       model%shell_fraction = 0.0_wp
-      ! particles speculated per batch: any value gives the same model (see phase 2)
-      batch = 4 * omp_get_max_threads()
+      ! particles speculated per batch: any value gives the same model (see phase 2), so the batch
+      ! adapts to the work per particle: large batches amortise the parallel region when particles
+      ! park in a few attempts, small ones limit the speculation wasted when a sieve ends
+      nthreads = omp_get_max_threads()
+      batch = nthreads
       call system_clock(t0, rate)
       tlast = t0
 
@@ -148,6 +152,7 @@ contains
             ! sequence. Adding particles only adds overlaps, so this is exactly the serial
             ! result whatever the batch size and the number of threads.
             allocate (at(batch))
+            batch_size_now = batch
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
             do b = 1, batch
                block
@@ -195,6 +200,8 @@ contains
                                                             + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
                if (vol >= target) exit
             end do
+            batch_attempts = sum(at%count)
+            batch = nthreads * max(1, min(32, int(4096 * batch_size_now / max(1_i8, batch_attempts))))
             deallocate (at)
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
