@@ -66,6 +66,8 @@ module anm_parking_config
       character(len=32) :: contact_method = "eob"
       !> N_ext and N_box.
       integer :: n_ext = 40, n_box = 128
+      !> Placement of candidate centres: "uniform" (the thesis) or "void" (drawn from free space).
+      character(len=16) :: placement = "uniform"
       !> Certified contact.
       logical :: certified = .true.
       !> Shells: number of layers, cumulative thicknesses, unit ("mm" or "fraction" of length).
@@ -112,6 +114,7 @@ contains
       real(wp) :: bc_mean, bc_sd, ab_mean, ab_sd, rough_c, rough_beta, sigma_rough
       integer :: max_locations, max_orientations, max_sizes, max_shapes, n_ext, n_box
       character(len=32) :: contact_method, mode
+      character(len=16) :: placement
       logical :: certified
       integer :: nlayer
       real(wp) :: thickness(max_layers), colour(3, max_layers)
@@ -125,7 +128,7 @@ contains
       namelist /sieves/ nsieve, min_width, max_width, fraction, fraction_mode, total_fraction, source, order
       namelist /synthetic/ count, nmax, bc_mean, bc_sd, ab_mean, ab_sd, rough_c, rough_beta, sigma_rough
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, contact_method, n_ext, n_box, &
-         certified
+         certified, placement
       namelist /shells/ nlayer, thickness, thickness_unit, mode, colour
       namelist /output/ directory, name, vrml, vrml_per_layer, tessellation
       namelist /run/ seed
@@ -170,6 +173,7 @@ contains
       n_ext = cfg%n_ext
       n_box = cfg%n_box
       certified = cfg%certified
+      placement = cfg%placement
       nlayer = 0
       thickness = unset
       thickness_unit = "fraction"
@@ -356,6 +360,13 @@ contains
       cfg%n_ext = n_ext
       cfg%n_box = n_box
       cfg%certified = certified
+      select case (to_lower(trim(placement)))
+      case ("uniform", "void")
+         cfg%placement = to_lower(trim(placement))
+      case default
+         call bad("parking", "placement", "= '"//trim(placement)//"' must be 'uniform' or 'void'")
+         return
+      end select
       if (nlayer < 0 .or. nlayer > max_layers) then
          call bad("shells", "nlayer", "= "//to_string(nlayer)//" must be in 0.."//to_string(max_layers))
          return
@@ -528,7 +539,7 @@ contains
              //to_string(cfg%max_orientations)//", max_sizes = "//to_string(cfg%max_sizes)//", max_shapes = " &
              //to_string(cfg%max_shapes)//", contact_method = '"//trim(cfg%contact_method)//"', n_ext = " &
              //to_string(cfg%n_ext)//", n_box = "//to_string(cfg%n_box)//", certified = " &
-             //merge(".true. ", ".false.", cfg%certified)//" /"//nl
+             //merge(".true. ", ".false.", cfg%certified)//", placement = '"//trim(cfg%placement)//"' /"//nl
       text = text//"&shells nlayer = "//to_string(cfg%nlayer)//", thickness_unit = '"//trim(cfg%thickness_unit) &
              //"', mode = '"//trim(mode_name(cfg%mode))//"'"
       do i = 1, cfg%nlayer

@@ -33,6 +33,7 @@ module anm_parking_engine
    use anm_shells_build, only: shell_report_type, build_layers
    use anm_parking_config, only: run_config_type, shell_mode, resolved_namelist
    use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_parking_void_grid, only: void_grid_type, new_void_grid
    use anm_io_model, only: model_type
    use omp_lib, only: omp_get_max_threads
    implicit none
@@ -108,6 +109,10 @@ contains
       integer(i8) :: batch_attempts
       logical :: keep, sieve_done
       type(attempt_type), allocatable :: at(:)
+      type(void_grid_type) :: vg
+      logical :: void
+      integer :: j, npark_sieve0
+      real(wp) :: r_in
 
       call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
       if (allocated(error)) return
@@ -139,12 +144,26 @@ contains
       call system_clock(t0, rate)
       tlast = t0
 
+      void = cfg%placement == "void"
       do s = 1, cfg%nsieve
          target = cfg%target_fraction(s) * vbox
          vol = 0.0_wp
          attempts_sieve = 0
          nstream = 0
          sieve_done = .false.
+         if (void) then
+            ! inscribed radius of the smallest particle this sieve can make
+            r_in = huge(1.0_wp)
+            do k = first_kind(s), first_kind(s) + nkind_sieve(s) - 1
+               r_in = min(r_in, kinds(k)%body%r_min * cfg%min_width(s) / kinds(k)%width)
+            end do
+            call new_void_grid(vg, cfg%box, cfg%periodic, r_in, 2**24)
+            do j = 1, np
+               call block(j)
+            end do
+            call vg%compact()
+         end if
+         npark_sieve0 = np
          do while (vol < target .and. .not. sieve_done)
             ! Phase 1 (parallel): the next `batch` particles each find their first fitting attempt
             ! against the frozen packing. Phase 2 (in order): each is re-checked against the
@@ -200,6 +219,13 @@ contains
                                                             + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
                if (vol >= target) exit
             end do
+            if (void) then
+               do j = np_frozen + 1, np
+                  call block(j)
+               end do
+               if (vg%stale > vg%nfree / 4) call vg%compact()
+               if (vg%nfree == 0) sieve_done = .true.
+            end if
             batch_attempts = sum(at%count)
             batch = nthreads * max(1, min(32, int(4096 * batch_size_now / max(1_i8, batch_attempts))))
             deallocate (at)
@@ -217,6 +243,8 @@ contains
             write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,f7.1,a)') "sieve ", s, " done: ", model%count(s), &
                " particles, fraction ", vol / vbox, " (target ", cfg%target_fraction(s), "), ", attempts_sieve, &
                " attempts, ", real(t1 - t0, wp) / rate, " s"
+            if (void) write (progress_unit, '(a,i0,a,f8.5,a,es10.3,a)') "sieve ", s, ": void grid free fraction ", &
+               vg%free_fraction(), " (inscribed radius ", r_in, " mm)"
             if (cfg%target_fraction(s) - vol / vbox > 0.01_wp * cfg%target_fraction(s)) then
                write (progress_unit, '(a,i0,a,f8.5,a)') "warning: sieve ", s, " ended ", &
                   cfg%target_fraction(s) - vol / vbox, " short of its target (attempts exhausted)"
@@ -337,9 +365,36 @@ contains
             a%count = a%count + 1
             return
          end if
-         a%c = random_centre(a%rng, a%sc * kinds(a%k)%body%r_min)
+         if (void) then
+            a%c = void_centre(a%rng)
+         else
+            a%c = random_centre(a%rng, a%sc * kinds(a%k)%body%r_min)
+         end if
          a%count = a%count + 1
       end subroutine next_attempt
+
+      !> A centre drawn uniformly from the free cells of the void grid (stale entries redrawn).
+      function void_centre(gen) result(x)
+         type(rng_type), intent(inout) :: gen
+         real(wp) :: x(3), u(4)
+         integer :: tries, q
+         do tries = 1, 64
+            do q = 1, 4
+               u(q) = gen%uniform()
+            end do
+            x = vg%draw(u(1), u(2), u(3), u(4))
+            if (.not. vg%is_blocked(x)) exit
+         end do
+      end function void_centre
+
+      !> Block the void-grid cells made invalid by parked particle jj.
+      subroutine block(jj)
+         integer, intent(in) :: jj
+         associate (kj => kinds(kind_of(jj)))
+            call vg%block_particle(kj%body%shape, center(:, jj), rot(:, :, jj), scale(jj), scale(jj) * kj%body%r_min, &
+                                   rho(jj))
+         end associate
+      end subroutine block
 
       !> Draw a new width (and width level) for the current shape of an attempt sequence.
       subroutine new_size(a, sv)
