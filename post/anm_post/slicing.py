@@ -248,7 +248,6 @@ class Slicer:
             raise AnmPostError("planes of one call must have the same pixel size and counts")
         a, b, bounds = self._particle_forms()
         orders = self._pairs[:, 1].astype(np.int32)
-        nform = len(orders)
         form = self._form + 1
         nlayer = 0 if self.shells is None else len(self.shells.thickness)
         shell_form = np.zeros((m.n_particles, nlayer), np.int32)
@@ -260,7 +259,6 @@ class Slicer:
             a, b, orders, bounds, form, shell_form, m.center, m.rotation, m.scale, m.box, m.periodic,
             np.array([p.origin for p in planes]), np.array([p.u for p in planes]), np.array([p.v for p in planes]),
             nu, nv, p0.pixel)
-        del nform
         names = ("queried", "candidates", "tests", "evaluations")
         out = []
         for k, p in enumerate(planes):
