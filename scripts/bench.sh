@@ -11,3 +11,4 @@ echo "# machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d:
 OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-sh 2>/dev/null
 OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-shells 2>/dev/null
 OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" bench-contact 2>/dev/null
+OMP_NUM_THREADS=2 python3 bench/bench_slicing.py "${ANM_SLICE_MODEL:-out/msand/model.h5}"

@@ -47,3 +47,19 @@ if [ "$installed" != "$(realpath "$here/post")" ]; then
     echo "setup: installing the anm_post package (post/)" >&2
     "$python" -m pip install -q --disable-pip-version-check --root-user-action=ignore --no-build-isolation --no-deps -e "$here/post"
 fi
+
+# the compiled kernels of anm_post (numpy.f2py + meson from src/api/slice_api.f90 and the program's
+# sources, post/meson.build): configured once in build/post-ext, rebuilt by ninja when a source
+# changed (a no-op otherwise), then copied into post/anm_post/ when it differs
+ext_build="$here/build/post-ext"
+if [ ! -f "$ext_build/build.ninja" ]; then
+    echo "setup: configuring the anm_post kernels (meson, build/post-ext)" >&2
+    rm -rf "$ext_build"
+    (cd "$here/post" && "$python" -m mesonbuild.mesonmain setup "$ext_build" . >/dev/null) || {
+        echo "setup: meson setup of the anm_post kernels failed (see $ext_build/meson-logs)" >&2; exit 1; }
+fi
+"$python" -m ninja -C "$ext_build" >"$ext_build/last-build.log" 2>&1 || {
+    cat "$ext_build/last-build.log" >&2; echo "setup: building the anm_post kernels failed" >&2; exit 1; }
+for so in "$ext_build"/_kernels*.so; do
+    cmp -s "$so" "$here/post/anm_post/$(basename "$so")" || cp "$so" "$here/post/anm_post/"
+done

@@ -12,6 +12,7 @@ program tester
    use test_parking, only: collect_parking
    use test_shells, only: collect_shells
    use test_contact, only: collect_contact
+   use test_slicing, only: collect_slicing
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -22,7 +23,7 @@ program tester
              new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
              new_testsuite("io", collect_io), new_testsuite("parking", collect_parking), &
              new_testsuite("shells", collect_shells), &
-             new_testsuite("contact", collect_contact)]
+             new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing)]
    npass = 0
    nfail = 0
    nskip = 0

@@ -1,14 +1,54 @@
-"""The `anm-post` command line (also `python -m anm_post`)."""
+"""The `anm-post` command line (also `python -m anm_post`): a thin layer over the library."""
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
+
+import numpy as np
 
 from .errors import AnmPostError
-from .tables import read_geometry_table
+from .tables import read_geometry_table, psd_table, format_psd
+
+EPILOG = """examples:
+  anm-post table out/default.h5                       PSD table of a model (text; --format csv|markdown)
+  anm-post table geom.txt --format markdown           geometry table written by `anm shape`
+  anm-post slice out/default.h5 --axis z --position 10 --pixel 0.05 --png out/slice.png --labels out/slice.npz
+  anm-post slice out/default.h5 --axis z --position 10 --pixel 0.05 --shells 0.02 --png out/itz.png
+  anm-post slice out/default.h5 --center 10 10 10 --normal 1 1 0 --size 12 12 --pixel 0.04 --png out/oblique.png
+  anm-post slice out/default.h5 --axis x --pixel 0.1 --density 0.1 --labels out/stack.h5   (stack, rho_s = 0.1)
+  anm-post plot next.csv -o next.png                  plot of `anm study next|nbox ... --csv next.csv`
+"""
+
+
+def _floats(text: str, option: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise AnmPostError(f"{option}: expected comma-separated numbers, got {text!r}") from None
+
+
+def _is_model(path: str) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(8) == b"\x89HDF\r\n\x1a\n"
+    except OSError:
+        return path.endswith((".h5", ".hdf5"))
 
 
 def _cmd_table(args: argparse.Namespace) -> int:
+    if _is_model(args.table):
+        from .model import read_model
+        model = read_model(args.table)
+        rows = psd_table(model)
+        fmt = "text" if args.format == "summary" else args.format
+        sys.stdout.write(format_psd(rows, fmt))
+        if args.csv:
+            try:
+                Path(args.csv).write_text(format_psd(rows, "csv"))
+            except OSError as exc:
+                raise AnmPostError(f"{args.csv}: cannot write CSV (--csv): {exc.strerror}") from None
+        return 0
     table = read_geometry_table(args.table)
     if args.csv:
         try:
@@ -16,7 +56,9 @@ def _cmd_table(args: argparse.Namespace) -> int:
                 fh.write(table.to_csv())
         except OSError as exc:
             raise AnmPostError(f"{args.csv}: cannot write CSV (--csv): {exc.strerror}") from None
-    if args.format == "markdown":
+    if args.format == "csv":
+        sys.stdout.write(table.to_csv())
+    elif args.format in ("markdown", "text"):
         cols = ["volume", "surf._area", "length(mm)", "width(mm)", "thick(mm)", "L/T", "W/T"]
         sys.stdout.write(table.to_markdown([c for c in cols if c in table.columns]))
     summary = table.summary()
@@ -24,24 +66,175 @@ def _cmd_table(args: argparse.Namespace) -> int:
     return 0
 
 
+def _plane_from_args(args: argparse.Namespace, model):
+    from .slicing import Plane, axis_plane
+
+    if args.center is not None or args.normal is not None:
+        if args.center is None or args.normal is None or args.size is None:
+            raise AnmPostError("--center, --normal and --size go together (an oblique slice)")
+        n = np.asarray(args.normal, float)
+        if not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
+            raise AnmPostError(f"--normal: must be a non-zero vector, got {args.normal}")
+        n /= np.linalg.norm(n)
+        a = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        u = np.cross(a, n)
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        w, h = args.size
+        origin = np.asarray(args.center, float) - 0.5 * w * u - 0.5 * h * v
+        return Plane(tuple(origin), tuple(u), tuple(v), (w, h), args.pixel)
+    if args.position is None:
+        raise AnmPostError("--position: required with --axis for a single slice (or give --density for a stack)")
+    return axis_plane(model, args.axis, args.position, args.pixel)
+
+
+def _cmd_slice(args: argparse.Namespace) -> int:
+    from .model import read_model
+    from .slicing import Slicer, ShellSpec
+    from .images import save_slice_png
+
+    if not (args.pixel > 0 and np.isfinite(args.pixel)):
+        raise AnmPostError(f"--pixel: must be a positive size in mm, got {args.pixel}")
+    model = read_model(args.model)
+    shells = None
+    if args.shells:
+        ids = None
+        if args.shell_particles:
+            try:
+                ids = tuple(int(x) for x in args.shell_particles.split(","))
+            except ValueError:
+                raise AnmPostError(f"--shell-particles: expected comma-separated ids, got {args.shell_particles!r}") \
+                    from None
+        try:
+            shells = ShellSpec(_floats(args.shells, "--shells"), unit=args.shell_unit, particles=ids)
+        except AnmPostError as exc:
+            raise AnmPostError(f"--shells/--shell-particles: {exc}") from None
+    nlayer = 0 if shells is None else len(shells.thickness)
+    try:
+        slicer = Slicer(model, shells)
+    except AnmPostError as exc:
+        raise AnmPostError(f"--shell-particles: {exc}") from None
+    if args.density is not None:
+        try:
+            results = list(slicer.stack(args.axis, args.pixel, args.density))
+        except AnmPostError as exc:
+            raise AnmPostError(f"--density: {exc}") from None
+        k = "xyz".index(args.axis)
+        print("slice,position_mm,particle_fraction" + "".join(f",layer{j}_fraction" for j in range(1, nlayer + 1)))
+        for i, r in enumerate(results):
+            print(f"{i},{r.plane.origin[k]:.6g},{r.particle_fraction:.6f}"
+                  + "".join(f",{f:.6f}" for f in r.layer_fractions(nlayer)))
+        mean = np.mean([r.particle_fraction for r in results])
+        print(f"# {len(results)} slices (rho_s = {args.density}), mean particle area fraction {mean:.4f}",
+              file=sys.stderr)
+        if args.labels:
+            _save_stack(results, args.labels)
+        if args.png:
+            save_slice_png(results[len(results) // 2], model, args.png, nlayer)
+        return 0
+    try:
+        plane = _plane_from_args(args, model)
+    except AnmPostError as exc:
+        raise AnmPostError(str(exc) if str(exc).startswith("--") else f"--position/--size/--pixel: {exc}") from None
+    result = slicer.slice(plane)
+    print(f"{model.path}: slice {result.particle.shape[1]} x {result.particle.shape[0]} pixels of {plane.pixel:g} mm; "
+          f"particle area fraction {result.particle_fraction:.4f}"
+          + "".join(f"; layer {j} {f:.4f}" for j, f in enumerate(result.layer_fractions(nlayer), start=1)))
+    if args.labels:
+        result.save(args.labels)
+    if args.png:
+        save_slice_png(result, model, args.png, nlayer)
+    return 0
+
+
+def _save_stack(results, path: str) -> None:
+    p = Path(path)
+    arrays = {k: np.stack([getattr(r, k) for r in results]) for k in ("particle", "layer", "owner", "sieve")}
+    origins = np.array([r.plane.origin for r in results])
+    try:
+        if p.suffix == ".npz":
+            np.savez_compressed(p, origin=origins, pixel=results[0].plane.pixel, **arrays)
+        elif p.suffix in (".h5", ".hdf5"):
+            import h5py
+            with h5py.File(p, "w") as fh:
+                fh.attrs["format"] = "anm-slice-stack"
+                fh.attrs["pixel"] = results[0].plane.pixel
+                fh.create_dataset("origin", data=origins)
+                for k, a in arrays.items():
+                    fh.create_dataset(k, data=a, compression="gzip")
+        else:
+            raise AnmPostError(f"{p}: --labels must end in .npz, .h5 or .hdf5")
+    except OSError as exc:
+        raise AnmPostError(f"{p}: cannot write (--labels): {exc}") from None
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from .plots import plot_study
+    out = args.output or str(Path(args.csv).with_suffix(".png"))
+    plot_study(args.csv, out)
+    print(out)
+    return 0
+
+
+def _triple(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of anm-post."""
     parser = argparse.ArgumentParser(
         prog="anm-post",
-        description="Post-processing of Anm output: tables (slices, g(t) and plots follow).",
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("table", help="summarise a geometry table written by `anm shape` (or a NIST table)")
-    p.add_argument("table", help="geometry table file")
+        description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot}")
+
+    p = sub.add_parser("table", help="PSD table of a model file, or a geometry table of `anm shape`",
+                       description="With a model file (.h5): the PSD table (per sieve: width range, target and "
+                                   "achieved volume fraction, count). With a text file: the geometry table summary.")
+    p.add_argument("table", help="model file (HDF5) or geometry table file")
     p.add_argument("--csv", metavar="FILE", help="also write the table as CSV to FILE")
-    p.add_argument("--format", choices=["summary", "markdown"], default="summary",
-                   help="summary line only (default) or a Markdown table and the summary")
+    p.add_argument("--format", choices=["summary", "text", "csv", "markdown"], default="summary",
+                   help="model: text (default) | csv | markdown; geometry table: summary line (default), "
+                        "markdown/text table or csv")
     p.set_defaults(func=_cmd_table)
+
+    p = sub.add_parser("slice", help="2D slice(s) of a model: label arrays and a PNG picture",
+                       description="Label every pixel of a slice with the particle containing it or the shell "
+                                   "layer (shells grown now around all or chosen particles). Axis slice: --axis "
+                                   "and --position; oblique slice: --center, --normal, --size; stack of parallel "
+                                   "axis slices over the box: --axis and --density (thesis rho_s, Eqs 3.3-3.4).",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", help="model file written by `anm run` (.h5)")
+    p.add_argument("--pixel", type=float, required=True, metavar="MM", help="pixel size R_s in mm per pixel")
+    p.add_argument("--axis", choices=["x", "y", "z"], default="z", help="normal axis of an axis slice (default z)")
+    p.add_argument("--position", type=float, metavar="MM", help="position of the axis slice along --axis (mm)")
+    p.add_argument("--center", type=_triple, nargs=3, metavar=("X", "Y", "Z"), help="oblique slice: centre (mm)")
+    p.add_argument("--normal", type=_triple, nargs=3, metavar=("NX", "NY", "NZ"), help="oblique slice: normal")
+    p.add_argument("--size", type=_triple, nargs=2, metavar=("W", "H"), help="oblique slice: width, height (mm)")
+    p.add_argument("--density", type=float, metavar="RHO",
+                   help="stack of parallel slices along --axis at slice density rho_s in (0, 1]; prints a CSV of "
+                        "area fractions per slice")
+    p.add_argument("--shells", metavar="T1[,T2..]",
+                   help="grow shells for the slice: cumulative outer distances of the layers from the surface")
+    p.add_argument("--shell-unit", choices=["fraction", "mm"], default="fraction",
+                   help="unit of --shells: fraction of each particle's length (default) or mm")
+    p.add_argument("--shell-particles", metavar="ID[,ID..]", help="grow shells only around these 0-based particles")
+    p.add_argument("--png", metavar="FILE", help="write the picture (with a legend) to FILE")
+    p.add_argument("--labels", metavar="FILE", help="write the label arrays to FILE (.npz, .h5)")
+    p.set_defaults(func=_cmd_slice)
+
+    p = sub.add_parser("plot", help="plot a contact study CSV (`anm study next|nbox SHAPE --csv FILE`)")
+    p.add_argument("csv", help="CSV with header next,v_box,v_box_certified or nbox,d_overlap")
+    p.add_argument("-o", "--output", metavar="PNG", help="output picture (default: the CSV name with .png)")
+    p.set_defaults(func=_cmd_plot)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code (1 with a message on bad input)."""
+    """Entry point; returns the exit code (1 with a message on bad input, 2 for usage errors)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -108,3 +108,40 @@ def _is_float(text: str) -> bool:
         return True
     except ValueError:
         return False
+
+
+#: Columns of the PSD table of a model.
+PSD_COLUMNS = ("sieve", "min_width_mm", "max_width_mm", "target_fraction", "achieved_fraction", "count")
+
+
+def psd_table(model) -> list[dict[str, float]]:
+    """The PSD table of a model (one row per sieve, then a total row with sieve = 'total')."""
+    s = model.sieves
+    rows = []
+    for k in range(model.n_sieves):
+        rows.append(dict(sieve=k + 1, min_width_mm=float(s["min_width"][k]), max_width_mm=float(s["max_width"][k]),
+                         target_fraction=float(s["target_fraction"][k]),
+                         achieved_fraction=float(s["achieved_fraction"][k]), count=int(s["count"][k])))
+    rows.append(dict(sieve="total", min_width_mm=float(np.min(s["min_width"])),
+                     max_width_mm=float(np.max(s["max_width"])), target_fraction=float(np.sum(s["target_fraction"])),
+                     achieved_fraction=float(np.sum(s["achieved_fraction"])), count=int(np.sum(s["count"]))))
+    return rows
+
+
+def format_psd(rows: list[dict[str, float]], fmt: str = "text") -> str:
+    """Format PSD rows as 'text' (aligned columns), 'csv' or 'markdown'."""
+    def cell(v) -> str:
+        return f"{v:.4f}" if isinstance(v, float) else str(v)
+
+    body = [[cell(r[c]) for c in PSD_COLUMNS] for r in rows]
+    if fmt == "csv":
+        return "\n".join([",".join(PSD_COLUMNS)] + [",".join(b) for b in body]) + "\n"
+    if fmt == "markdown":
+        lines = ["| " + " | ".join(PSD_COLUMNS) + " |", "|" + "---|" * len(PSD_COLUMNS)]
+        return "\n".join(lines + ["| " + " | ".join(b) + " |" for b in body]) + "\n"
+    if fmt != "text":
+        raise AnmPostError(f"unknown table format {fmt!r} (text, csv, markdown)")
+    widths = [max(len(c), *(len(b[j]) for b in body)) for j, c in enumerate(PSD_COLUMNS)]
+    out = ["  ".join(c.rjust(w) for c, w in zip(PSD_COLUMNS, widths))]
+    out += ["  ".join(x.rjust(w) for x, w in zip(b, widths)) for b in body]
+    return "\n".join(out) + "\n"
