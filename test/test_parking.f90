@@ -38,7 +38,8 @@ contains
               new_unittest("an unreachable target ends with a shortfall, not a loop", test_shortfall), &
               new_unittest("an unreadable shape folder names the variable", test_bad_source), &
               new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes), &
-              new_unittest("1 and 2 threads give the same model", test_threads)]
+              new_unittest("1 and 2 threads give the same model", test_threads), &
+              new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -231,7 +232,7 @@ contains
       type(verify_report_type) :: rep
       call run_nml("walls.nml", "&box length = 8, 8, 8, periodic = .false. /"//new_line("a")// &
                    "&sieves nsieve = 2, min_width = 2.0, 1.0, max_width = 2.4, 1.2, fraction = 0.15, 0.08, order = 8, 6 /" &
-                   //new_line("a")//"&synthetic count = 6 /", m, error)
+                   //new_line("a")//"&synthetic count = 6 /"//new_line("a")//"&parking max_locations = 20000 /", m, error)
       if (allocated(error)) return
       call verify_model(m, 60, rep)
       call check(error, rep%wall_violations == 0 .and. rep%overlapping_pairs == 0_i8, "walls or overlaps violated")
@@ -337,4 +338,22 @@ contains
       call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. all(a%scale == b%scale) &
                  .and. all(a%shape == b%shape) .and. all(a%sieve == b%sieve), "models differ between 1 and 2 threads")
    end subroutine test_threads
+   subroutine test_void(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: u, v
+      type(verify_report_type) :: rep
+      character(len=*), parameter :: base = "&box length = 10, 10, 10 /"//new_line("a")// &
+         "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.384, source = 'sphere', order = 0 /" &
+         //new_line("a")
+      call run_nml("uniform.nml", base//"&parking max_locations = 2000 /", u, error)
+      if (allocated(error)) return
+      call run_nml("void.nml", base//"&parking max_locations = 2000, placement = 'void' /", v, error)
+      if (allocated(error)) return
+      print '(a,f7.4,a,i0,a,f7.4,a,i0,a)', "        spheres, 2000 locations: uniform ", u%achieved_fraction(1), " (", &
+         u%attempts, " attempts), void ", v%achieved_fraction(1), " (", v%attempts, " attempts)"
+      call verify_model(v, 40, rep)
+      call check(error, rep%overlapping_pairs == 0_i8, "void placement produced overlaps")
+      if (allocated(error)) return
+      call check(error, v%achieved_fraction(1) >= u%achieved_fraction(1), "void placement packed less")
+   end subroutine test_void
 end module test_parking
