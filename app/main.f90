@@ -99,25 +99,37 @@ contains
       if (length > 0) call get_command_argument(i, arg)
    end function argument
 
+   !> Text of the value of option `name` (argument i+1), checked against the allowed characters;
+   !> advances i past the value.
+   subroutine option_text(i, name, allowed, what, text, error)
+      integer, intent(inout) :: i
+      character(len=*), intent(in) :: name, allowed, what
+      character(len=:), allocatable, intent(out) :: text
+      type(error_type), allocatable, intent(out) :: error
+      if (i + 1 > command_argument_count()) then
+         call fatal_error(error, "option "//name//" needs a value", error_code%value)
+         return
+      end if
+      text = argument(i + 1)
+      if (len(text) == 0 .or. verify(text, allowed) /= 0) then
+         call fatal_error(error, "option "//name//": '"//text//"' is not "//what, error_code%value)
+         return
+      end if
+      i = i + 1
+   end subroutine option_text
+
    !> Integer value of option `name` at argument position i+1.
    subroutine int_option(i, name, val, error)
       integer, intent(inout) :: i
       character(len=*), intent(in) :: name
       integer, intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
-      integer :: stat
       character(len=:), allocatable :: text
-      if (i + 1 > command_argument_count()) then
-         call fatal_error(error, "option "//name//" needs a value", error_code%value)
-         return
-      end if
-      text = argument(i + 1)
+      integer :: stat
+      call option_text(i, name, "+-0123456789", "an integer", text, error)
+      if (allocated(error)) return
       read (text, *, iostat=stat) val
-      if (stat /= 0 .or. verify(trim(text), "+-0123456789") /= 0) then
-         call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
-         return
-      end if
-      i = i + 1
+      if (stat /= 0) call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
    end subroutine int_option
 
    !> Real value of option `name` at argument position i+1.
@@ -126,19 +138,12 @@ contains
       character(len=*), intent(in) :: name
       real(wp), intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
-      integer :: stat
       character(len=:), allocatable :: text
-      if (i + 1 > command_argument_count()) then
-         call fatal_error(error, "option "//name//" needs a value", error_code%value)
-         return
-      end if
-      text = argument(i + 1)
+      integer :: stat
+      call option_text(i, name, "+-.0123456789eEdD", "a number", text, error)
+      if (allocated(error)) return
       read (text, *, iostat=stat) val
-      if (stat /= 0 .or. verify(trim(text), "+-.0123456789eEdD") /= 0) then
-         call fatal_error(error, "option "//name//": '"//text//"' is not a number", error_code%value)
-         return
-      end if
-      i = i + 1
+      if (stat /= 0) call fatal_error(error, "option "//name//": '"//text//"' is not a number", error_code%value)
    end subroutine real_option
 
    subroutine run_shape(error)
