@@ -491,7 +491,7 @@ contains
       real(wp), parameter :: eps = 1.0e-12_wp
       real(wp) :: th, ph, st, t0, t1, dph, rlo, rhi
       logical :: polar, all_out, all_in
-      integer :: l, l0, i0, i1, j0, j1, i, j, jj, ncol, pass
+      integer :: l, l0, i0, i1, j0, j1, i, j, jj, ncol, pass, nrow, ncl, k
       st = sqrt(u(1)**2 + u(2)**2)
       th = atan2(st, u(3))
       ph = atan2(u(2), u(1))
@@ -517,14 +517,29 @@ contains
       do pass = 1, 2
          all_out = .true.
          all_in = .true.
+         nrow = ishft(4, l)
+         ncl = ishft(8, l)
          outer: do j = j0, j0 + ncol - 1
-            jj = modulo(j - 1, patch_cols(l)) + 1
-            do i = i0, i1
-               call patch_bounds(b, l, i, jj, rlo, rhi)
-               if (rhi >= lo) all_out = .false.
-               if (rlo <= hi) all_in = .false.
-               if (.not. (all_out .or. all_in)) exit outer
-            end do
+            jj = j
+            if (jj < 1) jj = jj + ncl
+            if (jj > ncl) jj = jj - ncl
+            if (l <= leaf_level) then
+               k = b%off(l) + (jj - 1) * nrow
+               do i = i0, i1
+                  if (b%rhi(k + i) >= lo) all_out = .false.
+                  if (b%rlo(k + i) <= hi) all_in = .false.
+                  if (.not. (all_out .or. all_in)) exit outer
+               end do
+            else
+               k = b%doff(l) + (jj - 1) * nrow
+               do i = i0, i1
+                  rhi = real(b%dhi(k + i), wp)
+                  rlo = real(b%dlo(k + i), wp)
+                  if (rhi >= lo) all_out = .false.
+                  if (rlo <= hi) all_in = .false.
+                  if (.not. (all_out .or. all_in)) exit outer
+               end do
+            end if
          end do outer
          if (all_out) then
             code = code_outside
@@ -543,17 +558,17 @@ contains
          integer, intent(in) :: lev
          integer, intent(out) :: ia, ib, ja, jb, nc
          real(wp) :: h
-         h = pi / patch_rows(lev)
+         h = pi / ishft(4, lev)
          ia = max(1, floor(t0 / h) + 1)
-         ib = min(patch_rows(lev), floor(t1 / h) + 1)
+         ib = min(ishft(4, lev), floor(t1 / h) + 1)
          if (dph >= pi) then
             ja = 1
-            jb = patch_cols(lev)
+            jb = ishft(8, lev)
          else
             ja = floor((ph - dph) / h) + 1
             jb = floor((ph + dph) / h) + 1
          end if
-         nc = min(jb - ja + 1, patch_cols(lev))
+         nc = min(jb - ja + 1, ishft(8, lev))
       end subroutine cover
    end function cap_bounds
 
