@@ -43,7 +43,7 @@ module anm_contact_overlap
    private
 
    public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
-      & point_inside
+      & point_inside, sector_range
 
    !> Contact methods.
    type :: contact_method_enum
@@ -442,7 +442,9 @@ contains
    !> squared distance is convex in rho). This does not pay the sector's tangential extent, unlike
    !> the bounding ball.
    pure subroutine sector_range(q, dir, cosa, sina, rlo, rhi, smin, smax)
+      !> Point, unit cap direction, cos and sin of the cap half-angle alpha, radial range.
       real(wp), intent(in) :: q(3), dir(3), cosa, sina, rlo, rhi
+      !> Lower and upper bound of |x - q| over the sector.
       real(wp), intent(out) :: smin, smax
       real(wp), parameter :: eps = 8.0_wp * epsilon(1.0_wp)
       real(wp) :: qn, cg, sg, cd, rho, lo, c(3), s2, scale2
