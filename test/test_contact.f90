@@ -15,7 +15,7 @@ module test_contact
    use anm_contact_body, only: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, &
       & patch_cols, patch_index, patch_geometry, patch_bounds, slope_bound
    use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_depth, &
-      & body_crosses_walls
+      & body_crosses_walls, sector_range
    use anm_testing, only: unittest_type, new_unittest, check, shapes_dir
    implicit none
    private
@@ -38,6 +38,7 @@ contains
       tests = [ &
               new_unittest("patch bounds contain densely sampled r", test_patch_bounds), &
               new_unittest("deep patch bounds and local slope bounds hold", test_local_bounds), &
+              new_unittest("sector distance range holds and is attained", test_sector_range), &
               new_unittest("certified gap resolution on sphere and ellipsoid pairs", test_certified_gap), &
               new_unittest("spheres: exact decision to 1e-9 of tangency", test_spheres), &
               new_unittest("ellipsoids agree with Perram-Wertheim", test_ellipsoids), &
@@ -45,6 +46,61 @@ contains
               new_unittest("walls against exact ellipsoid extents", test_walls), &
               new_unittest("Newton-Raphson baseline on spheres and ellipsoids", test_newton_raphson)]
    end subroutine collect_contact
+
+   !> `sector_range` against sampled sector points: 20,000 random sectors (half-angles up to 1.2
+   !> rad, points q anywhere, often near the sector), 64 points each (a quarter on the rim); no
+   !> sampled distance may leave [smin, smax], and the sampled extremes must come close to them.
+   subroutine test_sector_range(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: nsector = 20000, npoint = 64
+      type(rng_type) :: rng
+      integer :: n, k, nbad
+      real(wp) :: dir(3), e1(3), e2(3), alpha, rlo, rhi, q(3), smin, smax, v(3), s, w, rho, dist, dlo, dhi, &
+                  slack, worst
+      call new_rng(rng, 2024_i8, 11_i8)
+      nbad = 0
+      worst = 0.0_wp
+      do n = 1, nsector
+         dir = [rng%normal(), rng%normal(), rng%normal()]
+         dir = dir / norm2(dir)
+         e1 = [dir(2), -dir(1), 0.0_wp]
+         if (norm2(e1) < 0.1_wp) e1 = [0.0_wp, dir(3), -dir(2)]
+         e1 = e1 / norm2(e1)
+         e2 = [dir(2) * e1(3) - dir(3) * e1(2), dir(3) * e1(1) - dir(1) * e1(3), dir(1) * e1(2) - dir(2) * e1(1)]
+         alpha = 1.2_wp * rng%uniform()**2 + 1.0e-4_wp
+         rlo = 0.5_wp + rng%uniform()
+         rhi = rlo + 0.5_wp * rng%uniform()
+         q = 3.0_wp * [rng%normal(), rng%normal(), rng%normal()]
+         if (mod(n, 2) == 0) q = (rlo + (rhi - rlo) * rng%uniform()) * dir + 0.3_wp * q
+         call sector_range(q, dir, cos(alpha), sin(alpha), rlo, rhi, smin, smax)
+         dlo = huge(1.0_wp)
+         dhi = 0.0_wp
+         do k = 1, npoint
+            w = two_pi * rng%uniform()
+            s = alpha * sqrt(rng%uniform())
+            rho = rlo + (rhi - rlo) * rng%uniform()
+            if (mod(k, 4) == 0) then
+               s = alpha
+               rho = merge(rlo, rhi, rng%uniform() < 0.5_wp)
+            end if
+            v = cos(s) * dir + sin(s) * (cos(w) * e1 + sin(w) * e2)
+            dist = norm2(rho * v - q)
+            dlo = min(dlo, dist)
+            dhi = max(dhi, dist)
+            if (dist < smin * (1.0_wp - 1.0e-12_wp) .or. dist > smax * (1.0_wp + 1.0e-12_wp)) nbad = nbad + 1
+         end do
+         ! attained: the sampled range approaches [smin, smax] (random sampling, small sectors)
+         if (alpha < 0.05_wp) then
+            slack = max(dlo - smin, smax - dhi) / (rhi + alpha * rhi)
+            worst = max(worst, slack)
+         end if
+      end do
+      write (output_unit, '(4x,a,i0,a,es10.2)') "sector range: points outside the bound ", nbad, &
+         "; largest gap to sampled extremes (half-angle < 0.05, relative to the sector size) ", worst
+      call check(error, nbad, 0)
+      if (allocated(error)) return
+      call check(error, worst < 0.2_wp, "sector range far from the sampled extremes")
+   end subroutine test_sector_range
 
    subroutine test_patch_bounds(error)
       type(error_type), allocatable, intent(out) :: error

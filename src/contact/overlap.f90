@@ -43,7 +43,7 @@ module anm_contact_overlap
    private
 
    public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
-      & point_inside
+      & point_inside, sector_range
 
    !> Contact methods.
    type :: contact_method_enum
@@ -82,10 +82,11 @@ module anm_contact_overlap
       integer :: nr_iterations = 30
    end type contact_params_type
 
-   !> A relative pose: y_B = m y_A + t; world x = cw + rw y_A.
+   !> A relative pose: y_B = m y_A + t; world x = cw + rw y_A; q = B's centre in A's frame.
    type :: pose_type
       real(wp) :: m(3, 3) = 0.0_wp
       real(wp) :: t(3) = 0.0_wp
+      real(wp) :: q(3) = 0.0_wp
       real(wp) :: k = 1.0_wp
       real(wp) :: rw(3, 3) = 0.0_wp
       real(wp) :: cw(3) = 0.0_wp
@@ -119,9 +120,9 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
-      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), tol
+      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
       type(pose_type) :: pab, pba
-      logical :: found
+      logical :: found, certain
 
       dvec = center_b - center_a
       dist = sqrt(sum(dvec**2))
@@ -153,15 +154,25 @@ contains
          hit = .false.
          return
       end if
-      ! stage 4: surface of A against B, then surface of B against A
+      ! stage 4: surface of A against B, then (unless A's surface was proven outside B) surface of
+      ! B against A
+      call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, .true., cbox_lo, cbox_hi)
       pab = make_pose(center_a, rot_a, scale_a, center_b, rot_b, scale_b)
       pba = make_pose(center_b, rot_b, scale_b, center_a, rot_a, scale_a)
       tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
                              scale_b * maxval(body_b%box_hi - body_b%box_lo))
       hit = .true.
-      call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, params, tol / scale_b, found)
+      call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol / scale_b, found, &
+                         certain)
       if (found) return
-      call probe_surface(body_b, body_a, pba, eob_lo, eob_hi, params, tol / scale_a, found)
+      ! A's surface certainly outside B: B is then inside A or disjoint from it, and B inside A
+      ! would put B's centre inside A (deeper than scale_b r_min of B), which stage 2 reports
+      if (certain) then
+         hit = .false.
+         return
+      end if
+      call probe_surface(body_b, body_a, pba, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol / scale_a, found, &
+                         certain)
       if (found) return
       hit = .false.
    end function bodies_overlap
@@ -288,6 +299,7 @@ contains
       ps%m = (sa / sb) * matmul(transpose(rb), ra)
       ps%t = matmul(ca - cb, rb) / sb
       ps%k = sa / sb
+      ps%q = matmul(cb - ca, ra) / sa
       ps%rw = sa * ra
       ps%cw = ca
       ps%sb = sb
@@ -377,21 +389,23 @@ contains
       call sector_ball(dir, cosa, sina, rlo, rhi, cen, rad)
    end subroutine patch_data
 
-   !> Classify the ball (centre y in B's frame, radius rho) against B: outside, inside or mixed.
-   !> The ball's points have directions within beta = asin(rho/|y|) of u = y/|y| and radii in
-   !> [|y| - rho, |y| + rho]; it is outside (inside) when B's r over that cap is certainly below
-   !> (above) that range. B's r is bounded by its stored patch bounds over the index rectangle that
-   !> covers the cap (`cap_bounds`) and, when these do not decide and beta is small, by the local
-   !> bound at u (`slope_bound`).
-   pure function classify_ball(b, y, rho) result(code)
+   !> Classify a shell sector of A against B: outside, inside or mixed. The sector lies in the
+   !> ball of centre y (B's frame) and radius rho, and its distances to B's centre lie in
+   !> [dmin, dmax] (`sector_range`, B units). Its points have directions within
+   !> beta = asin(rho/|y|) of u = y/|y| and radii in [max(|y| - rho, dmin), min(|y| + rho, dmax)];
+   !> it is outside (inside) when B's r over that cap is certainly below (above) that range. B's r
+   !> is bounded by its stored patch bounds over the index rectangle that covers the cap
+   !> (`cap_bounds`) and, when these do not decide and beta is small, by the local bound at u
+   !> (`slope_bound`).
+   pure function classify_ball(b, y, rho, dmin, dmax) result(code)
       type(contact_body_type), intent(in) :: b
-      real(wp), intent(in) :: y(3), rho
+      real(wp), intent(in) :: y(3), rho, dmin, dmax
       integer :: code
       real(wp), parameter :: beta_local = 0.02_wp
       real(wp) :: d, lo, hi, u(3), sinb, beta, r0, g0, w
       d = sqrt(sum(y**2))
-      lo = d - rho
-      hi = d + rho
+      lo = max(d - rho, dmin)
+      hi = min(d + rho, dmax)
       if (lo > b%r_max) then
          code = code_outside
          return
@@ -419,6 +433,53 @@ contains
       end if
    end function classify_ball
 
+   !> Range [smin, smax] of the distances from the point q to the shell sector
+   !> {rho v : angle(v, dir) <= alpha, rlo <= rho <= rhi} (the exact extremes, rounded outwards).
+   !> With gamma the angle from dir to q: when gamma <= alpha the nearest point is on the ray
+   !> through q; otherwise it lies in the plane of dir and q on the cap's rim ray at angle
+   !> delta = gamma - alpha from q, at rho = |q| cos delta clamped to [rlo, rhi]. The farthest
+   !> point is on the rim ray at angle min(gamma + alpha, pi) from q, at rho = rlo or rhi (the
+   !> squared distance is convex in rho). This does not pay the sector's tangential extent, unlike
+   !> the bounding ball.
+   pure subroutine sector_range(q, dir, cosa, sina, rlo, rhi, smin, smax)
+      !> Point, unit cap direction, cos and sin of the cap half-angle alpha, radial range.
+      real(wp), intent(in) :: q(3), dir(3), cosa, sina, rlo, rhi
+      !> Lower and upper bound of |x - q| over the sector.
+      real(wp), intent(out) :: smin, smax
+      real(wp), parameter :: eps = 8.0_wp * epsilon(1.0_wp)
+      real(wp) :: qn, cg, sg, cd, rho, lo, c(3), s2, scale2
+      lo = max(0.0_wp, rlo)
+      qn = sqrt(sum(q**2))
+      if (qn <= 0.0_wp) then
+         smin = lo
+         smax = rhi
+         return
+      end if
+      cg = dot_product(dir, q) / qn
+      c = [dir(2) * q(3) - dir(3) * q(2), dir(3) * q(1) - dir(1) * q(3), dir(1) * q(2) - dir(2) * q(1)]
+      sg = sqrt(sum(c**2)) / qn
+      scale2 = eps * (qn + rhi)**2
+      if (cg >= cosa) then
+         ! (both branches agree at gamma = alpha; the shell distance bounds the distance anyway)
+         smin = max(lo - qn, qn - rhi, 0.0_wp)
+         smin = max(0.0_wp, smin - eps * (qn + rhi))
+      else
+         ! cos(gamma - alpha)
+         cd = cg * cosa + sg * sina
+         rho = max(lo, min(rhi, qn * cd))
+         s2 = qn**2 + rho**2 - 2.0_wp * qn * rho * cd
+         smin = sqrt(max(0.0_wp, s2 - scale2))
+      end if
+      ! cos(min(gamma + alpha, pi))
+      if (sg * cosa + cg * sina >= 0.0_wp) then
+         cd = cg * cosa - sg * sina
+      else
+         cd = -1.0_wp
+      end if
+      s2 = max(qn**2 + lo**2 - 2.0_wp * qn * lo * cd, qn**2 + rhi**2 - 2.0_wp * qn * rhi * cd)
+      smax = sqrt(max(0.0_wp, s2 + scale2))
+   end subroutine sector_range
+
    !> Stored bounds of B's r over the cap (u, beta) against the radial range [lo, hi]: the patches
    !> of one level whose index rectangle covers the polar range theta(u) +- beta and the azimuth
    !> range phi(u) +- asin(sin beta / sin theta(u)) (all azimuths when the cap holds a pole). The
@@ -432,7 +493,7 @@ contains
       real(wp), parameter :: eps = 1.0e-12_wp
       real(wp) :: th, ph, st, t0, t1, dph, rlo, rhi
       logical :: polar, all_out, all_in
-      integer :: l, l0, i0, i1, j0, j1, i, j, jj, ncol, pass
+      integer :: l, l0, i0, i1, j0, j1, i, j, jj, ncol, pass, nrow, ncl, k
       st = sqrt(u(1)**2 + u(2)**2)
       th = atan2(st, u(3))
       ph = atan2(u(2), u(1))
@@ -458,14 +519,29 @@ contains
       do pass = 1, 2
          all_out = .true.
          all_in = .true.
+         nrow = ishft(4, l)
+         ncl = ishft(8, l)
          outer: do j = j0, j0 + ncol - 1
-            jj = modulo(j - 1, patch_cols(l)) + 1
-            do i = i0, i1
-               call patch_bounds(b, l, i, jj, rlo, rhi)
-               if (rhi >= lo) all_out = .false.
-               if (rlo <= hi) all_in = .false.
-               if (.not. (all_out .or. all_in)) exit outer
-            end do
+            jj = j
+            if (jj < 1) jj = jj + ncl
+            if (jj > ncl) jj = jj - ncl
+            if (l <= leaf_level) then
+               k = b%off(l) + (jj - 1) * nrow
+               do i = i0, i1
+                  if (b%rhi(k + i) >= lo) all_out = .false.
+                  if (b%rlo(k + i) <= hi) all_in = .false.
+                  if (.not. (all_out .or. all_in)) exit outer
+               end do
+            else
+               k = b%doff(l) + (jj - 1) * nrow
+               do i = i0, i1
+                  rhi = real(b%dhi(k + i), wp)
+                  rlo = real(b%dlo(k + i), wp)
+                  if (rhi >= lo) all_out = .false.
+                  if (rlo <= hi) all_in = .false.
+                  if (.not. (all_out .or. all_in)) exit outer
+               end do
+            end if
          end do outer
          if (all_out) then
             code = code_outside
@@ -484,17 +560,17 @@ contains
          integer, intent(in) :: lev
          integer, intent(out) :: ia, ib, ja, jb, nc
          real(wp) :: h
-         h = pi / patch_rows(lev)
+         h = pi / ishft(4, lev)
          ia = max(1, floor(t0 / h) + 1)
-         ib = min(patch_rows(lev), floor(t1 / h) + 1)
+         ib = min(ishft(4, lev), floor(t1 / h) + 1)
          if (dph >= pi) then
             ja = 1
-            jb = patch_cols(lev)
+            jb = ishft(8, lev)
          else
             ja = floor((ph - dph) / h) + 1
             jb = floor((ph + dph) / h) + 1
          end if
-         nc = min(jb - ja + 1, patch_cols(lev))
+         nc = min(jb - ja + 1, ishft(8, lev))
       end subroutine cover
    end function cap_bounds
 
@@ -515,14 +591,18 @@ contains
       end if
    end function radial_gap
 
-   pure subroutine probe_surface(a, b, ps, eob_lo, eob_hi, params, tol, found)
+   !> Test A's surface against B. `found`: contact found (certified mode: within the gap
+   !> tolerance). `certain` (when not found): every patch of A was proven outside B by certified
+   !> tests (no N_box scan, no pruning by the thesis' N_ext box that the certified box `cbox` does
+   !> not confirm), so A's surface is certainly outside B.
+   pure subroutine probe_surface(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, found, certain)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: ps
-      real(wp), intent(in) :: eob_lo(3), eob_hi(3)
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3)
       type(contact_params_type), intent(in) :: params
       !> Certified mode: radial gap tolerance in B units.
       real(wp), intent(in) :: tol
-      logical, intent(out) :: found
+      logical, intent(out) :: found, certain
       integer :: i, j, stop_level
       stop_level = stored_level
       if (params%certified) then
@@ -531,29 +611,37 @@ contains
          end do
       end if
       found = .false.
+      certain = .true.
       do j = 1, patch_cols(0)
          do i = 1, patch_rows(0)
-            call probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, 0, i, j, a%r_min, a%r_max, found)
+            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, 0, i, j, a%r_min, &
+                             a%r_max, found, certain)
             if (found) return
          end do
       end do
    end subroutine probe_surface
 
-   pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, l, i, j, plo, phi, &
-                                         found)
+   pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, l, &
+                                         i, j, plo, phi, found, certain)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: ps
-      real(wp), intent(in) :: eob_lo(3), eob_hi(3), tol
+      real(wp), intent(in) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
       type(contact_params_type), intent(in) :: params
       integer, intent(in) :: stop_level, l, i, j
       real(wp), intent(in) :: plo, phi
-      logical, intent(inout) :: found
-      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, th0, th1, ph0, ph1
+      logical, intent(inout) :: found, certain
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, th0, th1, ph0, ph1, smin, smax, xw(3), rw
       integer :: code, di, dj
 
       call patch_data(a, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
-      if (.not. ball_in_box(ps%cw + matmul(ps%rw, cen), rad * sqrt(sum(ps%rw(:, 1)**2)), eob_lo, eob_hi)) return
-      code = classify_ball(b, matmul(ps%m, cen) + ps%t, ps%k * rad)
+      xw = ps%cw + matmul(ps%rw, cen)
+      rw = rad * sqrt(sum(ps%rw(:, 1)**2))
+      if (.not. ball_in_box(xw, rw, eob_lo, eob_hi)) then
+         if (certain) certain = .not. ball_in_box(xw, rw, cbox_lo, cbox_hi)
+         return
+      end if
+      call sector_range(ps%q, dir, cosa, sina, rlo, rhi, smin, smax)
+      code = classify_ball(b, matmul(ps%m, cen) + ps%t, ps%k * rad, ps%k * smin, ps%k * smax)
       if (code == code_outside) return
       if (code == code_inside) then
          found = .true.
@@ -572,6 +660,7 @@ contains
             found = .true.
          else
             ! undecided at the finest stored level: scan at N_box
+            certain = .false.
             call patch_rect(l, i, j, th0, th1, ph0, ph1)
             call scan_rect(a, b, ps, eob_lo, eob_hi, params%nbox, th0, th1, ph0, ph1, found)
          end if
@@ -579,8 +668,8 @@ contains
       end if
       do dj = 0, 1
          do di = 0, 1
-            call probe_patch(a, b, ps, eob_lo, eob_hi, params, tol, stop_level, l + 1, 2 * i - 1 + di, &
-                             2 * j - 1 + dj, rlo, rhi, found)
+            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, l + 1, &
+                             2 * i - 1 + di, 2 * j - 1 + dj, rlo, rhi, found, certain)
             if (found) return
          end do
       end do
@@ -645,11 +734,13 @@ contains
       integer, intent(in) :: nbox, l, i, j
       real(wp), intent(inout) :: depth
       integer :: k, di, dj, i0, i1, j0, j1, ii, jj
-      real(wp) :: th0, th1, ph0, ph1, th, ph, u(3), x(3)
+      real(wp) :: th0, th1, ph0, ph1, th, ph, u(3), x(3), smin, smax
       k = patch_index(a, l, i, j)
       if (.not. ball_in_box(ps%cw + matmul(ps%rw, a%ball(:, k)), a%brad(k) * sqrt(sum(ps%rw(:, 1)**2)), &
                             eob_lo, eob_hi)) return
-      if (classify_ball(b, matmul(ps%m, a%ball(:, k)) + ps%t, ps%k * a%brad(k)) == code_outside) return
+      call sector_range(ps%q, a%dir(:, k), a%cosa(k), a%sina(k), a%rlo(k), a%rhi(k), smin, smax)
+      if (classify_ball(b, matmul(ps%m, a%ball(:, k)) + ps%t, ps%k * a%brad(k), ps%k * smin, ps%k * smax) &
+          == code_outside) return
       if (l < leaf_level) then
          do dj = 0, 1
             do di = 0, 1
