@@ -394,22 +394,27 @@ contains
       real(wp), intent(in) :: f(:, :)
       integer, intent(in) :: nmax
       real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp), allocatable :: fc(:, :), fs(:, :)
-      integer :: i, m, k0, lm
+      real(wp), allocatable :: tt(:, :), fcs(:, :)
+      integer :: i, j, m, k0, lm
 
       lm = surf%grid%lmax
-      fc = matmul(f, transpose(surf%grid%trig(1:nmax + 1, :)))
+      ! contiguous (nphi, 2 nmax + 1) table of cos(m phi) then sin(m phi): one product in the
+      ! library's blocked path (a transposed section argument takes its slow strided path)
+      allocate (tt(size(f, 2), 2 * nmax + 1))
+      do j = 1, size(f, 2)
+         tt(j, 1:nmax + 1) = surf%grid%trig(1:nmax + 1, j)
+         tt(j, nmax + 2:2 * nmax + 1) = surf%grid%trig(lm + 2:lm + 1 + nmax, j)
+      end do
+      fcs = matmul(f, tt)
       a = 0.0_wp
       b = 0.0_wp
-      if (nmax > 0) fs = matmul(f, transpose(surf%grid%trig(lm + 2:lm + 1 + nmax, :)))
       do i = 1, size(f, 1)
-         fc(i, :) = fc(i, :) * surf%grid%sphere%weight(i)
-         if (nmax > 0) fs(i, :) = fs(i, :) * surf%grid%sphere%weight(i)
+         fcs(i, :) = fcs(i, :) * surf%grid%sphere%weight(i)
       end do
       do m = 0, nmax
          k0 = surf%grid%idx(m)
-         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fc(:, m + 1))
-         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fs(:, m))
+         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, m + 1))
+         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, nmax + 1 + m))
       end do
    end subroutine grid_analyze
 

@@ -20,8 +20,8 @@
 !>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_distance, &
-      & cross3
+   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_frame_trig, &
+      & surface_distance, cross3
    implicit none
    private
 
@@ -210,21 +210,27 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp), allocatable :: ts(:), ps(:), f(:, :), bt(:), bp(:), bf(:, :)
+      real(wp), allocatable :: ts(:), ps(:), f(:, :), sc(:, :), bt(:), bp(:), bf(:, :), bsc(:, :)
       integer, allocatable :: state(:), run(:)
       real(wp) :: u(3), e1(3), e2(3), rho, xf(3)
-      integer :: nt, np, n, k, i, j, it, nrun, b0, b1
+      integer :: nt, np, n, k, i, j, it, nrun, b0, b1, is, js, lm
 
       nt = size(rt, 1)
       np = size(rt, 2)
       n = nt * np
-      allocate (ts(n), ps(n), f(6, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block))
+      lm = surf%grid%lmax
+      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
+                bsc(4, eval_block))
       do j = 1, np
          do i = 1, nt
             k = i + (j - 1) * nt
-            ts(k) = surf%grid%sphere%theta(start(1, i, j))
-            ps(k) = surf%grid%sphere%phi(start(2, i, j))
-            f(:, k) = surf%f(:, start(1, i, j), start(2, i, j))
+            is = start(1, i, j)
+            js = start(2, i, j)
+            ts(k) = surf%grid%sphere%theta(is)
+            ps(k) = surf%grid%sphere%phi(js)
+            f(:, k) = surf%f(:, is, js)
+            ! sin/cos of the start node from the grid's tables
+            sc(:, k) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
             state(k) = newton_state%running
          end do
       end do
@@ -237,7 +243,7 @@ contains
                k = i + (j - 1) * nt
                if (state(k) /= newton_state%running) cycle
                call node_frame(surf, i, j, u, e1, e2)
-               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), ts(k), ps(k), state(k), rho, xf)
+               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), sc(:, k), ts(k), ps(k), state(k), rho, xf)
                if (state(k) == newton_state%running) then
                   nrun = nrun + 1
                   run(nrun) = k
@@ -252,8 +258,9 @@ contains
             b1 = min(nrun, b0 + eval_block - 1)
             bt(1:b1 - b0 + 1) = ts(run(b0:b1))
             bp(1:b1 - b0 + 1) = ps(run(b0:b1))
-            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1))
+            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1), bsc(:, 1:b1 - b0 + 1))
             f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
+            sc(:, run(b0:b1)) = bsc(:, 1:b1 - b0 + 1)
          end do
          nev = nev + nrun
       end do
@@ -320,7 +327,7 @@ contains
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
       real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, du, perp2, g, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2)
+      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4)
       integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, ci(4), cj(4), npc
       logical :: all_phi
 
@@ -406,13 +413,20 @@ contains
                j0 = ceiling(phlo / dphi) + 1
                ncol = floor(phhi / dphi) + 2 - j0
             end if
+            ! the corners as four lanes: (u . x_c, |x_c|^2 - (u . x_c)^2) for all four in one go
+            do kc = 1, 4
+               xc(kc, :) = surf%x(:, ci(kc), cj(kc))
+               xxc(kc) = xx(ci(kc), cj(kc))
+            end do
             do jc = 1, ncol
                ja = 1 + modulo(j0 + jc - 2, np)
                do ia = i0, i1
+                  du4 = surf%u(1, ia, ja) * xc(:, 1) + surf%u(2, ia, ja) * xc(:, 2) + surf%u(3, ia, ja) * xc(:, 3)
+                  perp4 = xxc - du4 * du4
                   do kc = 1, npc
                      ii = ci(kc)
-                     du = dot_product(surf%u(:, ia, ja), surf%x(:, ii, cj(kc)))
-                     perp2 = xx(ii, cj(kc)) - du * du
+                     du = du4(kc)
+                     perp2 = perp4(kc)
                      if (perp2 < t2) then
                         ! g = du + sqrt(t2 - perp2) > lower, without the square root unless it is
                         g = lower(ia, ja) - du
@@ -441,7 +455,13 @@ contains
       real(wp) :: d
       thlo = min(thlo, th)
       thhi = max(thhi, th)
-      d = modulo(ph - ph0 + pi, two_pi) - pi
+      ! ph and ph0 are atan2 values in [-pi, pi]: one turn at most brings d into [-pi, pi)
+      d = ph - ph0
+      if (d >= pi) then
+         d = d - two_pi
+      else if (d < -pi) then
+         d = d + two_pi
+      end if
       phlo = min(phlo, d)
       phhi = max(phhi, d)
    end subroutine widen
@@ -512,7 +532,7 @@ contains
          nev = 1
       end if
       do it = 1, max_newton
-         call newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+         call newton_update(u, e1, e2, t, rnode, f, [sin(ts), cos(ts), sin(ps), cos(ps)], ts, ps, state, rho, xf)
          if (state /= newton_state%running) exit
          call eval_surface(surf, ts, ps, f)
          nev = nev + 1
@@ -525,8 +545,8 @@ contains
    !> x_p dp + second-order terms), and state = converged if the local conditions hold (beta > 0 with
    !> rnode = r(u), u . n > 0, strict local minimum of the distance: 1 - t kappa_i > 0), else failed.
    !> Otherwise (ts, ps) takes the (damped) step and state = running (failed near the poles).
-   pure subroutine newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
-      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6)
+   pure subroutine newton_update(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6), sc(4)
       real(wp), intent(inout) :: ts, ps
       integer, intent(out) :: state
       real(wp), intent(out) :: rho, xf(3)
@@ -537,13 +557,13 @@ contains
       state = newton_state%failed
       rho = 0.0_wp
       xf = 0.0_wp
-      call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
-      sgn = sign(1.0_wp, sin(ts))
-      nv = sgn * cross3(xt, xp)
+      call surface_frame_trig(sc, f, x, xt, xp, xtt, xtp, xpp)
+      sgn = sign(1.0_wp, sc(1))
+      nv = sgn * cross(xt, xp)
       nn = sqrt(dot_product(nv, nv))
       nh = nv / nn
-      nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
-      np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
+      nt = sgn * (cross(xtt, xp) + cross(xt, xtp))
+      np = sgn * (cross(xtp, xp) + cross(xt, xpp))
       nt = (nt - nh * dot_product(nh, nt)) / nn
       np = (np - nh * dot_product(nh, np)) / nn
       q = x + t * nh
@@ -580,6 +600,14 @@ contains
       ps = ps + lam * dp
       if (abs(sin(ts)) >= pole_sin) state = newton_state%running
    end subroutine newton_update
+
+   !> Cross product (the module's own copy of `cross3`, so that the compiler inlines it in the
+   !> Newton step).
+   pure function cross(a, b) result(c)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: c(3)
+      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+   end function cross
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

@@ -19,7 +19,7 @@ module anm_shells_surface
    private
 
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
-      & surface_distance, closest_point, cross3
+      & surface_frame_trig, surface_distance, closest_point, cross3
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -248,13 +248,15 @@ contains
 
    !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
    !> with the points innermost (vectorised), for blocks of a few hundred points.
-   pure subroutine eval_surface_many(surf, theta, phi, f)
+   pure subroutine eval_surface_many(surf, theta, phi, f, sc)
       !> Surface data.
       type(shell_surface_type), intent(in) :: surf
       !> Polar angles and azimuths (|sin(theta)| not tiny).
       real(wp), intent(in) :: theta(:), phi(:)
       !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
       real(wp), intent(out) :: f(:, :)
+      !> sc(:, k) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
+      real(wp), intent(out), optional :: sc(:, :)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
       real(wp), dimension(size(theta)) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
                                           a0, b0, a1, b1, ann, bnn
@@ -265,6 +267,12 @@ contains
       s = sin(theta)
       cp = cos(phi)
       sp = sin(phi)
+      if (present(sc)) then
+         sc(1, :) = s
+         sc(2, :) = x
+         sc(3, :) = sp
+         sc(4, :) = cp
+      end if
       inv_s = 1.0_wp / s
       cots = x * inv_s
       nmax = surf%shape%nmax
@@ -332,11 +340,23 @@ contains
       real(wp), intent(in) :: f(6)
       !> Point, first and second derivatives.
       real(wp), intent(out) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3)
+      call surface_frame_trig([sin(theta), cos(theta), sin(phi), cos(phi)], f, x, xt, xp, xtt, xtp, xpp)
+   end subroutine surface_frame
+
+   !> `surface_frame` from the sines and cosines of the direction, sc = [sin theta, cos theta,
+   !> sin phi, cos phi] (as returned by `eval_surface_many`), without trigonometric calls.
+   pure subroutine surface_frame_trig(sc, f, x, xt, xp, xtt, xtp, xpp)
+      !> sin(theta), cos(theta), sin(phi), cos(phi).
+      real(wp), intent(in) :: sc(4)
+      !> r and derivatives from eval_surface.
+      real(wp), intent(in) :: f(6)
+      !> Point, first and second derivatives.
+      real(wp), intent(out) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3)
       real(wp) :: st, ct, sp, cp, rh(3), th(3), ph(3), rho(3)
-      st = sin(theta)
-      ct = cos(theta)
-      sp = sin(phi)
-      cp = cos(phi)
+      st = sc(1)
+      ct = sc(2)
+      sp = sc(3)
+      cp = sc(4)
       rh = [st * cp, st * sp, ct]
       th = [ct * cp, ct * sp, -st]
       ph = [-sp, cp, 0.0_wp]
@@ -347,7 +367,7 @@ contains
       xtt = (f(4) - f(1)) * rh + 2.0_wp * f(2) * th
       xtp = f(5) * rh + f(3) * th + (f(2) * st + f(1) * ct) * ph
       xpp = f(6) * rh + 2.0_wp * f(3) * st * ph - f(1) * st * rho
-   end subroutine surface_frame
+   end subroutine surface_frame_trig
 
    !> Cross product.
    pure function cross3(a, b) result(c)
