@@ -326,9 +326,9 @@ contains
       real(wp), intent(out) :: lower(:, :)
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
-      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, du, perp2, g, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4)
-      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, ci(4), cj(4), npc
+      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
+      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4), g4(4)
+      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, kb, ci(4), cj(4), npc
       logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
@@ -418,30 +418,32 @@ contains
                xc(kc, :) = surf%x(:, ci(kc), cj(kc))
                xxc(kc) = xx(ci(kc), cj(kc))
             end do
+            ! the unused lanes of a polar triangle are never within t of a ray
+            xxc(npc + 1:4) = huge(1.0_wp)
             do jc = 1, ncol
                ja = 1 + modulo(j0 + jc - 2, np)
                do ia = i0, i1
                   du4 = surf%u(1, ia, ja) * xc(:, 1) + surf%u(2, ia, ja) * xc(:, 2) + surf%u(3, ia, ja) * xc(:, 3)
                   perp4 = xxc - du4 * du4
-                  do kc = 1, npc
-                     ii = ci(kc)
-                     du = du4(kc)
-                     perp2 = perp4(kc)
-                     if (perp2 < t2) then
-                        ! g = du + sqrt(t2 - perp2) > lower, without the square root unless it is
-                        g = lower(ia, ja) - du
-                        if (g < 0.0_wp .or. t2 - perp2 > g * g) then
-                           lower(ia, ja) = du + sqrt(t2 - perp2)
-                           start(:, ia, ja) = [ii, cj(kc)]
-                        end if
-                     else if (lower(ia, ja) == -huge(1.0_wp)) then
-                        c = dot_product(surf%u(:, ia, ja), qd(:, ii, cj(kc)))
+                  ! g_u of the corners within t of the ray (four lanes, one vector square root)
+                  g4 = merge(du4 + sqrt(max(0.0_wp, t2 - perp4)), -huge(1.0_wp), perp4 < t2)
+                  kb = 1
+                  do kc = 2, 4
+                     if (g4(kc) > g4(kb)) kb = kc
+                  end do
+                  if (g4(kb) > lower(ia, ja)) then
+                     lower(ia, ja) = g4(kb)
+                     start(:, ia, ja) = [ci(kb), cj(kb)]
+                  else if (lower(ia, ja) == -huge(1.0_wp)) then
+                     ! no sample within t of this ray yet: the best-aligned offset direction
+                     do kc = 1, npc
+                        c = dot_product(surf%u(:, ia, ja), qd(:, ci(kc), cj(kc)))
                         if (c > align(ia, ja)) then
                            align(ia, ja) = c
-                           start(:, ia, ja) = [ii, cj(kc)]
+                           start(:, ia, ja) = [ci(kc), cj(kc)]
                         end if
-                     end if
-                  end do
+                     end do
+                  end if
                end do
             end do
          end do

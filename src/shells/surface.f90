@@ -18,6 +18,10 @@ module anm_shells_surface
    implicit none
    private
 
+   !> Points per group of `eval_surface_many` (four AVX-512 registers per quantity: independent
+   !> recurrence chains, all in L1; 8 and 16 were slower, 64 no better).
+   integer, parameter :: lanes = 32
+
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
       & surface_frame_trig, surface_distance, closest_point, cross3
 
@@ -247,7 +251,7 @@ contains
    end subroutine eval_surface
 
    !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
-   !> with the points innermost (vectorised), for blocks of a few hundred points.
+   !> on groups of `lanes` points held in fixed-size arrays (one vector register per quantity).
    pure subroutine eval_surface_many(surf, theta, phi, f, sc)
       !> Surface data.
       type(shell_surface_type), intent(in) :: surf
@@ -257,29 +261,53 @@ contains
       real(wp), intent(out) :: f(:, :)
       !> sc(:, k) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
       real(wp), intent(out), optional :: sc(:, :)
+      real(wp) :: th(lanes), ph(lanes), fl(6, lanes), scl(4, lanes)
+      integer :: k0, nk
+
+      do k0 = 1, size(theta), lanes
+         nk = min(lanes, size(theta) - k0 + 1)
+         ! a short last group is padded with the equator (any point with sin(theta) away from 0)
+         th = 0.5_wp * pi
+         ph = 0.0_wp
+         th(1:nk) = theta(k0:k0 + nk - 1)
+         ph(1:nk) = phi(k0:k0 + nk - 1)
+         call eval_lanes(surf, th, ph, fl, scl)
+         f(:, k0:k0 + nk - 1) = fl(:, 1:nk)
+         if (present(sc)) sc(:, k0:k0 + nk - 1) = scl(:, 1:nk)
+      end do
+   end subroutine eval_surface_many
+
+   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`).
+   pure subroutine eval_lanes(surf, theta, phi, f, sc)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: theta(lanes), phi(lanes)
+      real(wp), intent(out) :: f(6, lanes), sc(4, lanes)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
-      real(wp), dimension(size(theta)) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
-                                          a0, b0, a1, b1, ann, bnn
-      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq
+      real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
+                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, q
+      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq, rm
       integer :: m, n, k0, nmax
 
       x = cos(theta)
       s = sin(theta)
       cp = cos(phi)
       sp = sin(phi)
-      if (present(sc)) then
-         sc(1, :) = s
-         sc(2, :) = x
-         sc(3, :) = sp
-         sc(4, :) = cp
-      end if
+      sc(1, :) = s
+      sc(2, :) = x
+      sc(3, :) = sp
+      sc(4, :) = cp
       inv_s = 1.0_wp / s
       cots = x * inv_s
       nmax = surf%shape%nmax
       pmm = inv_sqrt_4pi
       cm = 1.0_wp
       sm = 0.0_wp
-      f = 0.0_wp
+      f1 = 0.0_wp
+      f2 = 0.0_wp
+      f3 = 0.0_wp
+      f4 = 0.0_wp
+      f5 = 0.0_wp
+      f6 = 0.0_wp
       do m = 0, nmax
          if (m > 0) then
             pmm = -surf%shape%table%sect(m) * s * pmm
@@ -320,16 +348,23 @@ contains
             ann = ann + (an * nn1) * p1
             bnn = bnn + (bn * nn1) * p1
          end do
-         msq = real(m * m, wp)
-         f(1, :) = f(1, :) + a0 * cm + b0 * sm
-         f(2, :) = f(2, :) + a1 * cm + b1 * sm
-         f(3, :) = f(3, :) + m * (b0 * cm - a0 * sm)
-         f(4, :) = f(4, :) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm &
-                   + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
-         f(5, :) = f(5, :) + m * (b1 * cm - a1 * sm)
-         f(6, :) = f(6, :) - msq * (a0 * cm + b0 * sm)
+         rm = real(m, wp)
+         msq = rm * rm
+         q = msq * inv_s * inv_s
+         f1 = f1 + a0 * cm + b0 * sm
+         f2 = f2 + a1 * cm + b1 * sm
+         f3 = f3 + rm * (b0 * cm - a0 * sm)
+         f4 = f4 + (-cots * a1 - ann + q * a0) * cm + (-cots * b1 - bnn + q * b0) * sm
+         f5 = f5 + rm * (b1 * cm - a1 * sm)
+         f6 = f6 - msq * (a0 * cm + b0 * sm)
       end do
-   end subroutine eval_surface_many
+      f(1, :) = f1
+      f(2, :) = f2
+      f(3, :) = f3
+      f(4, :) = f4
+      f(5, :) = f5
+      f(6, :) = f6
+   end subroutine eval_lanes
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
    !> x, x_t, x_p, x_tt, x_tp, x_pp (Cartesian, body frame).
