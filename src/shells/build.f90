@@ -46,8 +46,11 @@ module anm_shells_build
    real(wp), parameter :: max_outside_radius = 0.02_wp
    !> Largest number of lifting iterations of the one-sided correction.
    integer, parameter :: max_lifts = 40
-   !> Relaxation factor of a lifting iteration.
+   !> Relaxation factor of the first lifting iteration.
    real(wp), parameter :: lift_factor = 2.0_wp
+   !> Largest relaxation factor: the factor doubles after every lift that less than halves the
+   !> deepest violation (narrow crease deficits are spread thinly by the projection).
+   real(wp), parameter :: max_lift_factor = 16.0_wp
 
    !> What happened while building one shell (lengths in shape units).
    type :: shell_report_type
@@ -325,8 +328,9 @@ contains
       type(sh_expansion_type), intent(out) :: outer
       type(shell_report_type), intent(inout) :: report
       real(wp), allocatable :: a(:, :), b(:, :), fit(:, :), da(:, :), db(:, :), deficit(:, :)
-      real(wp) :: target, res
+      real(wp) :: target, res, factor, worst, previous
       integer :: lo, hi, mid, best
+      logical :: have_fit
 
       target = default_fit_tol * t
       if (present(fit_tol)) target = fit_tol * t
@@ -334,10 +338,13 @@ contains
       call grid_analyze(surf, rt, cap, a, b)
       call new_sh_expansion_real(outer, a, b)
       best = cap
+      have_fit = .false.
       if (search) then
          call sh_synthesize(surf%grid, outer, fit)
          res = maxval(abs(rt - fit))
+         have_fit = .true.
          if (res <= target) then
+            have_fit = .false.
             lo = 0
             hi = cap
             do while (lo < hi)
@@ -352,13 +359,18 @@ contains
             best = lo
          end if
       end if
-      call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
-      call sh_synthesize(surf%grid, outer, fit)
+      if (.not. have_fit) then
+         ! (otherwise outer and fit already hold the full order cap)
+         call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
+         call sh_synthesize(surf%grid, outer, fit)
+      end if
       ! one-sided correction: lift the fit where it lies inside R_t (creases) until it lies inside
       ! by at most inside_tol t at every node
       allocate (da(0:best, 0:best), db(0:best, 0:best), deficit(size(rt, 1), size(rt, 2)))
       report%lifts = 0
-      do while (lift .and. maxval(rt - fit) > inside_tol * t .and. report%lifts < max_lifts)
+      factor = lift_factor
+      worst = maxval(rt - fit)
+      do while (lift .and. worst > inside_tol * t .and. report%lifts < max_lifts)
          ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
          ! sums over the violating nodes only when they are few (cost per node ~ order^2 against
@@ -368,11 +380,15 @@ contains
          else
             call grid_analyze(surf, deficit, best, da, db)
          end if
-         a(0:best, 0:best) = a(0:best, 0:best) + lift_factor * da
-         b(0:best, 0:best) = b(0:best, 0:best) + lift_factor * db
+         a(0:best, 0:best) = a(0:best, 0:best) + factor * da
+         b(0:best, 0:best) = b(0:best, 0:best) + factor * db
          call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
          call sh_synthesize(surf%grid, outer, fit)
          report%lifts = report%lifts + 1
+         previous = worst
+         worst = maxval(rt - fit)
+         ! slow progress (the projection spreads a narrow deficit thinly): lift harder next time
+         if (worst > 0.5_wp * previous) factor = min(max_lift_factor, 2.0_wp * factor)
       end do
       report%order = best
       report%fit_residual = maxval(abs(rt - fit))
