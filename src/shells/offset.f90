@@ -44,6 +44,8 @@ module anm_shells_offset
    real(wp), parameter :: pole_sin = 1.0e-6_wp
    !> Points per call of `eval_surface_many`.
    integer, parameter :: eval_block = 256
+   !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
+   integer, parameter :: step_lanes = 32
 
    !> States of a Newton iteration (enumerator).
    type :: newton_state_enum
@@ -211,15 +213,18 @@ contains
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
       real(wp), allocatable :: ts(:), ps(:), f(:, :), sc(:, :), bt(:), bp(:), bf(:, :), bsc(:, :)
-      integer, allocatable :: state(:), run(:)
-      real(wp) :: u(3), e1(3), e2(3), rho, xf(3)
-      integer :: nt, np, n, k, i, j, it, nrun, b0, b1, is, js, lm
+      integer, allocatable :: state(:), run(:), next(:)
+      real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
+      real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
+      real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
+      integer :: lstate(step_lanes)
+      integer :: nt, np, n, k, i, j, it, nrun, nnext, b0, b1, is, js, lm, l, nl
 
       nt = size(rt, 1)
       np = size(rt, 2)
       n = nt * np
       lm = surf%grid%lmax
-      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
+      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), next(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
                 bsc(4, eval_block))
       do j = 1, np
          do i = 1, nt
@@ -236,23 +241,44 @@ contains
       end do
       rt = 0.0_wp
       fx = 0.0_wp
+      nrun = n
+      run = [(k, k = 1, n)]
       do it = 1, max_newton
-         nrun = 0
-         do j = 1, np
-            do i = 1, nt
-               k = i + (j - 1) * nt
-               if (state(k) /= newton_state%running) cycle
-               call node_frame(surf, i, j, u, e1, e2)
-               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), sc(:, k), ts(k), ps(k), state(k), rho, xf)
-               if (state(k) == newton_state%running) then
-                  nrun = nrun + 1
-                  run(nrun) = k
-               else if (state(k) == newton_state%converged) then
-                  rt(i, j) = rho
-                  fx(:, i, j) = xf
+         ! one Newton step for the running directions, `step_lanes` at a time
+         nnext = 0
+         do b0 = 1, nrun, step_lanes
+            nl = min(step_lanes, nrun - b0 + 1)
+            do l = 1, step_lanes
+               ! short groups repeat their first direction (results discarded)
+               k = run(b0 + merge(l, 1, l <= nl) - 1)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
+               lrn(l) = surf%r(i, j)
+               lf(l, :) = f(:, k)
+               lsc(l, :) = sc(:, k)
+               lts(l) = ts(k)
+               lps(l) = ps(k)
+            end do
+            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+            do l = 1, nl
+               k = run(b0 + l - 1)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               ts(k) = lts(l)
+               ps(k) = lps(l)
+               state(k) = lstate(l)
+               if (lstate(l) == newton_state%running) then
+                  nnext = nnext + 1
+                  next(nnext) = k
+               else if (lstate(l) == newton_state%converged) then
+                  rt(i, j) = lrho(l)
+                  fx(:, i, j) = lxf(l, :)
                end if
             end do
          end do
+         nrun = nnext
+         run(1:nrun) = next(1:nrun)
          if (nrun == 0) exit
          do b0 = 1, nrun, eval_block
             b1 = min(nrun, b0 + eval_block - 1)
@@ -327,9 +353,9 @@ contains
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
       real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4), g4(4)
+      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4), g4(4), d4(4), lw
       integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, kb, ci(4), cj(4), npc
-      logical :: all_phi
+      logical :: all_phi, hit4(4)
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
@@ -425,16 +451,23 @@ contains
                do ia = i0, i1
                   du4 = surf%u(1, ia, ja) * xc(:, 1) + surf%u(2, ia, ja) * xc(:, 2) + surf%u(3, ia, ja) * xc(:, 3)
                   perp4 = xxc - du4 * du4
-                  ! g_u of the corners within t of the ray (four lanes, one vector square root)
-                  g4 = merge(du4 + sqrt(max(0.0_wp, t2 - perp4)), -huge(1.0_wp), perp4 < t2)
-                  kb = 1
-                  do kc = 2, 4
-                     if (g4(kc) > g4(kb)) kb = kc
-                  end do
-                  if (g4(kb) > lower(ia, ja)) then
-                     lower(ia, ja) = g4(kb)
-                     start(:, ia, ja) = [ci(kb), cj(kb)]
-                  else if (lower(ia, ja) == -huge(1.0_wp)) then
+                  ! corners within t of the ray whose g_u = du + sqrt(t^2 - perp^2) beats the bound,
+                  ! decided without the square root (d < 0, or t^2 - perp^2 > d^2 with d = bound - du;
+                  ! d is clamped below so that an unset bound does not overflow)
+                  lw = lower(ia, ja)
+                  d4 = max(lw - du4, -1.0_wp)
+                  hit4 = perp4 < t2 .and. (d4 < 0.0_wp .or. t2 - perp4 > d4 * d4)
+                  if (any(hit4)) then
+                     g4 = merge(du4 + sqrt(max(0.0_wp, t2 - perp4)), -huge(1.0_wp), hit4)
+                     kb = 1
+                     do kc = 2, 4
+                        if (g4(kc) > g4(kb)) kb = kc
+                     end do
+                     if (g4(kb) > lw) then
+                        lower(ia, ja) = g4(kb)
+                        start(:, ia, ja) = [ci(kb), cj(kb)]
+                     end if
+                  else if (lw == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
                      do kc = 1, npc
                         c = dot_product(surf%u(:, ia, ja), qd(:, ci(kc), cj(kc)))
@@ -602,6 +635,129 @@ contains
       ps = ps + lam * dp
       if (abs(sin(ts)) >= pole_sin) state = newton_state%running
    end subroutine newton_update
+
+   !> `newton_update` for `step_lanes` directions at once (one direction per lane; arrays
+   !> (lane, component), branches as masks), the same arithmetic and the same outcomes.
+   pure subroutine newton_lanes(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(step_lanes, 3), e1(step_lanes, 3), e2(step_lanes, 3), t, rnode(step_lanes)
+      real(wp), intent(in) :: f(step_lanes, 6), sc(step_lanes, 4)
+      real(wp), intent(inout) :: ts(step_lanes), ps(step_lanes)
+      integer, intent(out) :: state(step_lanes)
+      real(wp), intent(out) :: rho(step_lanes), xf(step_lanes, 3)
+      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2
+      real(wp), dimension(step_lanes) :: st, ct, sp, cp, sgn, nn, inn, dnt, dnp, f1, f2, j11, j12, j21, j22, det, &
+                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1
+      logical, dimension(step_lanes) :: good, finish, ok
+      integer :: c
+
+      st = sc(:, 1)
+      ct = sc(:, 2)
+      sp = sc(:, 3)
+      cp = sc(:, 4)
+      rh(:, 1) = st * cp
+      rh(:, 2) = st * sp
+      rh(:, 3) = ct
+      th(:, 1) = ct * cp
+      th(:, 2) = ct * sp
+      th(:, 3) = -st
+      r1 = f(:, 1)
+      do c = 1, 3
+         x(:, c) = r1 * rh(:, c)
+         xt(:, c) = f(:, 2) * rh(:, c) + r1 * th(:, c)
+         xtt(:, c) = (f(:, 4) - r1) * rh(:, c) + 2.0_wp * f(:, 2) * th(:, c)
+         xtp(:, c) = f(:, 5) * rh(:, c) + f(:, 3) * th(:, c)
+         xpp(:, c) = f(:, 6) * rh(:, c)
+         xp(:, c) = f(:, 3) * rh(:, c)
+      end do
+      ! phi-hat = (-sin phi, cos phi, 0) and rho-hat = (cos phi, sin phi, 0) terms
+      a = f(:, 2) * st + r1 * ct
+      xp(:, 1) = xp(:, 1) - r1 * st * sp
+      xp(:, 2) = xp(:, 2) + r1 * st * cp
+      xtp(:, 1) = xtp(:, 1) - a * sp
+      xtp(:, 2) = xtp(:, 2) + a * cp
+      xpp(:, 1) = xpp(:, 1) - 2.0_wp * f(:, 3) * st * sp - r1 * st * cp
+      xpp(:, 2) = xpp(:, 2) + 2.0_wp * f(:, 3) * st * cp - r1 * st * sp
+      sgn = sign(1.0_wp, st)
+      call cross_lanes(xt, xp, nv)
+      nv = nv * spread(sgn, 2, 3)
+      nn = sqrt(nv(:, 1)**2 + nv(:, 2)**2 + nv(:, 3)**2)
+      inn = 1.0_wp / nn
+      do c = 1, 3
+         nh(:, c) = nv(:, c) * inn
+      end do
+      call cross_lanes(xtt, xp, nt)
+      call cross_lanes(xt, xtp, q)
+      nt = (nt + q) * spread(sgn, 2, 3)
+      call cross_lanes(xtp, xp, np)
+      call cross_lanes(xt, xpp, q)
+      np = (np + q) * spread(sgn, 2, 3)
+      dnt = nh(:, 1) * nt(:, 1) + nh(:, 2) * nt(:, 2) + nh(:, 3) * nt(:, 3)
+      dnp = nh(:, 1) * np(:, 1) + nh(:, 2) * np(:, 2) + nh(:, 3) * np(:, 3)
+      do c = 1, 3
+         nt(:, c) = (nt(:, c) - nh(:, c) * dnt) * inn
+         np(:, c) = (np(:, c) - nh(:, c) * dnp) * inn
+         q(:, c) = x(:, c) + t * nh(:, c)
+         qt(:, c) = xt(:, c) + t * nt(:, c)
+         qp(:, c) = xp(:, c) + t * np(:, c)
+      end do
+      f1 = dot_lanes(q, e1)
+      f2 = dot_lanes(q, e2)
+      j11 = dot_lanes(qt, e1)
+      j12 = dot_lanes(qp, e1)
+      j21 = dot_lanes(qt, e2)
+      j22 = dot_lanes(qp, e2)
+      det = j11 * j22 - j12 * j21
+      good = abs(det) > tiny(det) * 1.0e10_wp
+      det = merge(det, 1.0_wp, good)
+      dt = -(j22 * f1 - j12 * f2) / det
+      dp = -(j11 * f2 - j21 * f1) / det
+      big = max(abs(dt), abs(dp))
+      finish = good .and. big <= finish_step
+      ! finished lanes: local conditions and the second-order Taylor root
+      h11 = dot_lanes(xt, xt) - t * dot_lanes(nh, xtt)
+      h12 = dot_lanes(xt, xp) - t * dot_lanes(nh, xtp)
+      h22 = dot_lanes(xp, xp) - t * dot_lanes(nh, xpp)
+      cu = dot_lanes(nh, u)
+      do c = 1, 3
+         x2(:, c) = x(:, c) + xt(:, c) * dt + xp(:, c) * dp + 0.5_wp * (xtt(:, c) * dt * dt &
+                    + 2.0_wp * xtp(:, c) * dt * dp + xpp(:, c) * dp * dp)
+      end do
+      du = dot_lanes(u, x2)
+      perp2 = max(0.0_wp, dot_lanes(x2, x2) - du * du)
+      ok = finish .and. h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. cu > 0.0_wp .and. perp2 <= t * t
+      rho = merge(du + sqrt(max(0.0_wp, t * t - perp2)), 0.0_wp, ok)
+      do c = 1, 3
+         xf(:, c) = merge(x2(:, c), 0.0_wp, ok)
+      end do
+      ! running lanes: the damped step
+      lam = min(1.0_wp, 0.2_wp / merge(big, 1.0_wp, good .and. .not. finish))
+      lam = merge(lam, 1.0_wp, .not. finish)
+      where (ok .or. (good .and. .not. finish))
+         ts = ts + lam * dt
+         ps = ps + lam * dp
+      end where
+      state = newton_state%failed
+      where (ok .and. rho > rnode) state = newton_state%converged
+      where (good .and. .not. finish)
+         state = merge(newton_state%running, newton_state%failed, abs(sin(ts)) >= pole_sin)
+      end where
+   end subroutine newton_lanes
+
+   !> c = a x b per lane.
+   pure subroutine cross_lanes(a, b, c)
+      real(wp), intent(in) :: a(:, :), b(:, :)
+      real(wp), intent(out) :: c(:, :)
+      c(:, 1) = a(:, 2) * b(:, 3) - a(:, 3) * b(:, 2)
+      c(:, 2) = a(:, 3) * b(:, 1) - a(:, 1) * b(:, 3)
+      c(:, 3) = a(:, 1) * b(:, 2) - a(:, 2) * b(:, 1)
+   end subroutine cross_lanes
+
+   !> a . b per lane.
+   pure function dot_lanes(a, b) result(d)
+      real(wp), intent(in) :: a(:, :), b(:, :)
+      real(wp) :: d(size(a, 1))
+      d = a(:, 1) * b(:, 1) + a(:, 2) * b(:, 2) + a(:, 3) * b(:, 3)
+   end function dot_lanes
 
    !> Cross product (the module's own copy of `cross3`, so that the compiler inlines it in the
    !> Newton step).
