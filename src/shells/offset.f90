@@ -353,9 +353,9 @@ contains
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
       real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2), xc(4, 3), xxc(4), du4(4), perp4(4), g4(4), d4(4), lw
-      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, kb, ci(4), cj(4), npc
-      logical :: all_phi, hit4(4)
+      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc
+      logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
@@ -385,45 +385,38 @@ contains
       mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
-         jj = 1 + modulo(j, np)
-         do i = 0, nt
-            ! corners of the cell between rows i and i + 1 (rows 0 and nt + 1: across the pole)
-            ci = [i, i, i + 1, i + 1]
-            cj = [j, jj, j, jj]
-            do kc = 1, 4
-               if (ci(kc) < 1 .or. ci(kc) > nt) then
-                  ci(kc) = merge(1, nt, ci(kc) < 1)
-                  cj(kc) = 1 + modulo(cj(kc) - 1 + np / 2, np)
-               end if
-            end do
+         do i = 1, nt
+            ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
+            ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1,
+            ! and across a pole the pole's offset direction (the polar triangles). Every pair
+            ! (node, corner) of a cell box is in it; near the poles, where a cell's box is a whole
+            ! ring, each pair is tried once instead of once per cell.
+            ph0 = qph(i, j)
             thlo = pi
             thhi = 0.0_wp
             phlo = 0.0_wp
             phhi = 0.0_wp
-            npc = 4
-            if (i == 0 .or. i == nt) then
-               ! a polar triangle: two corners of the first (last) ring and the offset direction of
-               ! the pole, approximated by the mean offset point of that ring
-               npc = 2
-               ci(1:2) = merge(1, nt, i == 0)
-               cj(1:2) = [j, jj]
-               pole = pole_dir(:, merge(1, 2, i == 0))
+            do jc = -1, 1
+               jb = 1 + modulo(j + jc - 1, np)
+               do ii = max(1, i - 1), min(nt, i + 1)
+                  call widen(qth(ii, jb), qph(ii, jb), ph0, thlo, thhi, phlo, phhi)
+               end do
+            end do
+            if (i == 1 .or. i == nt) then
+               pole = pole_dir(:, merge(1, 2, i == 1))
                d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
                if (min(d, pi - d) < 0.5_wp * minval(surf%grid%sphere%theta)) then
                   ! at the pole itself (closer than any node): its azimuth is meaningless
                   thlo = min(thlo, d)
                   thhi = max(thhi, d)
                else
-                  call widen(d, atan2(pole(2), pole(1)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+                  call widen(d, atan2(pole(2), pole(1)), ph0, thlo, thhi, phlo, phhi)
                end if
             end if
-            do kc = 1, npc
-               call widen(qth(ci(kc), cj(kc)), qph(ci(kc), cj(kc)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
-            end do
             all_phi = phhi - phlo > pi
             if (all_phi) then
                ! the patch holds a pole
-               if (qd(3, ci(1), cj(1)) > 0.0_wp) then
+               if (qd(3, i, j) > 0.0_wp) then
                   thlo = 0.0_wp
                else
                   thhi = pi
@@ -434,48 +427,33 @@ contains
                j0 = 1
                ncol = np
             else
-               phlo = qph(ci(1), cj(1)) + phlo - mph
-               phhi = qph(ci(1), cj(1)) + phhi + mph
+               phlo = ph0 + phlo - mph
+               phhi = ph0 + phhi + mph
                j0 = ceiling(phlo / dphi) + 1
                ncol = floor(phhi / dphi) + 2 - j0
             end if
-            ! the corners as four lanes: (u . x_c, |x_c|^2 - (u . x_c)^2) for all four in one go
-            do kc = 1, 4
-               xc(kc, :) = surf%x(:, ci(kc), cj(kc))
-               xxc(kc) = xx(ci(kc), cj(kc))
-            end do
-            ! the unused lanes of a polar triangle are never within t of a ray
-            xxc(npc + 1:4) = huge(1.0_wp)
+            xs = surf%x(:, i, j)
+            xxs = xx(i, j)
             do jc = 1, ncol
                ja = 1 + modulo(j0 + jc - 2, np)
                do ia = i0, i1
-                  du4 = surf%u(1, ia, ja) * xc(:, 1) + surf%u(2, ia, ja) * xc(:, 2) + surf%u(3, ia, ja) * xc(:, 3)
-                  perp4 = xxc - du4 * du4
-                  ! corners within t of the ray whose g_u = du + sqrt(t^2 - perp^2) beats the bound,
-                  ! decided without the square root (d < 0, or t^2 - perp^2 > d^2 with d = bound - du;
-                  ! d is clamped below so that an unset bound does not overflow)
-                  lw = lower(ia, ja)
-                  d4 = max(lw - du4, -1.0_wp)
-                  hit4 = perp4 < t2 .and. (d4 < 0.0_wp .or. t2 - perp4 > d4 * d4)
-                  if (any(hit4)) then
-                     g4 = merge(du4 + sqrt(max(0.0_wp, t2 - perp4)), -huge(1.0_wp), hit4)
-                     kb = 1
-                     do kc = 2, 4
-                        if (g4(kc) > g4(kb)) kb = kc
-                     end do
-                     if (g4(kb) > lw) then
-                        lower(ia, ja) = g4(kb)
-                        start(:, ia, ja) = [ci(kb), cj(kb)]
+                  du = surf%u(1, ia, ja) * xs(1) + surf%u(2, ia, ja) * xs(2) + surf%u(3, ia, ja) * xs(3)
+                  perp2 = xxs - du * du
+                  if (perp2 < t2) then
+                     ! g_u = du + sqrt(t^2 - perp^2) > bound, decided without the square root
+                     ! (dd clamped below so that an unset bound does not overflow)
+                     dd = max(lower(ia, ja) - du, -1.0_wp)
+                     if (dd < 0.0_wp .or. t2 - perp2 > dd * dd) then
+                        lower(ia, ja) = du + sqrt(t2 - perp2)
+                        start(:, ia, ja) = [i, j]
                      end if
-                  else if (lw == -huge(1.0_wp)) then
+                  else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
-                     do kc = 1, npc
-                        c = dot_product(surf%u(:, ia, ja), qd(:, ci(kc), cj(kc)))
-                        if (c > align(ia, ja)) then
-                           align(ia, ja) = c
-                           start(:, ia, ja) = [ci(kc), cj(kc)]
-                        end if
-                     end do
+                     c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
+                     if (c > align(ia, ja)) then
+                        align(ia, ja) = c
+                        start(:, ia, ja) = [i, j]
+                     end if
                   end if
                end do
             end do
