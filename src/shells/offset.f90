@@ -233,7 +233,6 @@ contains
             js = start(2, i, j)
             ts(k) = surf%grid%sphere%theta(is)
             ps(k) = surf%grid%sphere%phi(js)
-            f(:, k) = surf%f(:, is, js)
             ! sin/cos of the start node from the grid's tables
             sc(:, k) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
             state(k) = newton_state%running
@@ -255,7 +254,12 @@ contains
                j = 1 + (k - 1) / nt
                call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
                lrn(l) = surf%r(i, j)
-               lf(l, :) = f(:, k)
+               if (it == 1) then
+                  ! the first step from the tabulated derivatives of the start sample
+                  lf(l, :) = surf%f(:, start(1, i, j), start(2, i, j))
+               else
+                  lf(l, :) = f(:, k)
+               end if
                lsc(l, :) = sc(:, k)
                lts(l) = ts(k)
                lps(l) = ps(k)
@@ -502,21 +506,21 @@ contains
       end if
    end subroutine row_range
 
-   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none).
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): a guess from the
+   !> asymptotic Gauss-Legendre nodes, theta_i ~ pi (i - 1/4) / (n + 1/2), corrected by a walk.
    pure function first_at_least(theta, v) result(k)
       real(wp), intent(in) :: theta(:), v
-      integer :: k, lo, hi, mid
-      lo = 1
-      hi = size(theta) + 1
-      do while (lo < hi)
-         mid = (lo + hi) / 2
-         if (theta(mid) >= v) then
-            hi = mid
-         else
-            lo = mid + 1
-         end if
+      integer :: k, n
+      n = size(theta)
+      k = max(1, min(n, nint(v * (n + 0.5_wp) / pi + 0.25_wp)))
+      do while (k > 1)
+         if (theta(k - 1) < v) exit
+         k = k - 1
       end do
-      k = lo
+      do while (k <= n)
+         if (theta(k) >= v) exit
+         k = k + 1
+      end do
    end function first_at_least
 
    !> Newton-Raphson for Eq 2.1 along u (theta-hat e1, phi-hat e2 span the plane perpendicular to

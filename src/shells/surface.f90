@@ -14,7 +14,7 @@
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals, sh_synthesize
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
    implicit none
    private
 
@@ -65,7 +65,7 @@ contains
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
       integer :: n, m, k, i, j, nt, np, jn
-      real(wp) :: rn, rm, h
+      real(wp) :: rn, rm, h, st, ct, cp, sp, rh(3), th(3), ph(3), v(3)
 
       surf%shape = shape
       allocate (surf%enm(size(shape%table%ca)))
@@ -81,8 +81,24 @@ contains
       nt = ntheta
       np = 2 * ntheta
       surf%grid = new_sh_grid(nt, np, max(lmax, shape%nmax, 2))
-      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np))
-      call sh_grid_normals(surf%grid, shape, surf%x, surf%n)
+      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np), surf%u(3, nt, np))
+      ! r and its derivatives, then points and normals from the same syntheses (as `sh_grid_normals`;
+      ! surf%r holds (dr/dphi) / sin(theta) until the radii are set below)
+      call grid_derivatives(surf%grid, shape, surf%f, surf%r)
+      do j = 1, np
+         cp = cos(surf%grid%sphere%phi(j))
+         sp = sin(surf%grid%sphere%phi(j))
+         do i = 1, nt
+            st = surf%grid%sphere%sint(i)
+            ct = surf%grid%sphere%x(i)
+            rh = [st * cp, st * sp, ct]
+            th = [ct * cp, ct * sp, -st]
+            ph = [-sp, cp, 0.0_wp]
+            surf%x(:, i, j) = surf%f(1, i, j) * rh
+            v = surf%f(1, i, j) * rh - surf%f(2, i, j) * th - surf%r(i, j) * ph
+            surf%n(:, i, j) = v / norm2(v)
+         end do
+      end do
       h = 0.0_wp
       do j = 1, np
          jn = 1 + mod(j, np)
@@ -103,8 +119,6 @@ contains
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
-      allocate (surf%f(6, nt, np), surf%u(3, nt, np))
-      call grid_derivatives(surf%grid, shape, surf%f)
       do j = 1, np
          do i = 1, nt
             surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
@@ -116,13 +130,15 @@ contains
    !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
    !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
    !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
-   pure subroutine grid_derivatives(grid, shape, f)
+   pure subroutine grid_derivatives(grid, shape, f, r_phi_sin)
       !> Grid with tables.
       type(sh_grid_type), intent(in) :: grid
       !> Expansion.
       type(sh_expansion_type), intent(in) :: shape
       !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
       real(wp), intent(out) :: f(:, :, :)
+      !> (dr/dphi) / sin(theta) at the nodes (for the normals).
+      real(wp), intent(out) :: r_phi_sin(:, :)
       type(sh_expansion_type) :: dphi, dphi2, lap
       real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
       integer :: n, m, nmax, nt, np, i
@@ -153,7 +169,7 @@ contains
          end do
       end do
       call new_sh_expansion_real(lap, a, b)
-      call sh_synthesize(grid, shape, w1, w2, w3, nused=nmax)
+      call sh_synthesize(grid, shape, w1, w2, r_phi_sin, nused=nmax)
       f(1, :, :) = w1
       f(2, :, :) = w2
       call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
