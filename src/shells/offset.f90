@@ -345,11 +345,14 @@ contains
 
    !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
    !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
-   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by strips across the
+   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by triangles to the
    !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
-   !> directions, so each cell's corners are tried on the direction nodes inside the (theta, phi)
-   !> box of those directions, widened by a quarter spacing. The node of every direction lies in
-   !> the image of the cell holding its true foot, whose corners are within one cell of it.
+   !> directions, so each cell's corners must be tried on the direction nodes inside the
+   !> (theta, phi) box of those directions, widened by a quarter spacing. The node of every
+   !> direction lies in the image of the cell holding its true foot, whose corners are within one
+   !> cell of it. Each sample is tried once on the box of the union of its (up to four) cells,
+   !> which holds every cell box it belongs to (near the poles, where a cell box is a whole ring,
+   !> a pair is then tried once instead of once per cell).
    pure subroutine sampled_starts(surf, t, lower, start)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t
@@ -661,18 +664,20 @@ contains
       xpp(:, 2) = xpp(:, 2) + 2.0_wp * f(:, 3) * st * cp - r1 * st * sp
       sgn = sign(1.0_wp, st)
       call cross_lanes(xt, xp, nv)
-      nv = nv * spread(sgn, 2, 3)
+      call cross_lanes(xtt, xp, nt)
+      call cross_lanes(xt, xtp, q)
+      call cross_lanes(xtp, xp, np)
+      call cross_lanes(xt, xpp, qt)
+      do c = 1, 3
+         nv(:, c) = sgn * nv(:, c)
+         nt(:, c) = sgn * (nt(:, c) + q(:, c))
+         np(:, c) = sgn * (np(:, c) + qt(:, c))
+      end do
       nn = sqrt(nv(:, 1)**2 + nv(:, 2)**2 + nv(:, 3)**2)
       inn = 1.0_wp / nn
       do c = 1, 3
          nh(:, c) = nv(:, c) * inn
       end do
-      call cross_lanes(xtt, xp, nt)
-      call cross_lanes(xt, xtp, q)
-      nt = (nt + q) * spread(sgn, 2, 3)
-      call cross_lanes(xtp, xp, np)
-      call cross_lanes(xt, xpp, q)
-      np = (np + q) * spread(sgn, 2, 3)
       dnt = nh(:, 1) * nt(:, 1) + nh(:, 2) * nt(:, 2) + nh(:, 3) * nt(:, 3)
       dnp = nh(:, 1) * np(:, 1) + nh(:, 2) * np(:, 2) + nh(:, 3) * np(:, 3)
       do c = 1, 3
