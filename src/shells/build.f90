@@ -46,8 +46,11 @@ module anm_shells_build
    real(wp), parameter :: max_outside_radius = 0.02_wp
    !> Largest number of lifting iterations of the one-sided correction.
    integer, parameter :: max_lifts = 40
-   !> Relaxation factor of a lifting iteration.
+   !> Relaxation factor of the first lifting iteration.
    real(wp), parameter :: lift_factor = 2.0_wp
+   !> Largest relaxation factor: the factor doubles after every lift that less than halves the
+   !> deepest violation (narrow crease deficits are spread thinly by the projection).
+   real(wp), parameter :: max_lift_factor = 16.0_wp
 
    !> What happened while building one shell (lengths in shape units).
    type :: shell_report_type
@@ -325,8 +328,9 @@ contains
       type(sh_expansion_type), intent(out) :: outer
       type(shell_report_type), intent(inout) :: report
       real(wp), allocatable :: a(:, :), b(:, :), fit(:, :), da(:, :), db(:, :), deficit(:, :)
-      real(wp) :: target, res
+      real(wp) :: target, res, factor, worst, previous
       integer :: lo, hi, mid, best
+      logical :: have_fit
 
       target = default_fit_tol * t
       if (present(fit_tol)) target = fit_tol * t
@@ -334,10 +338,13 @@ contains
       call grid_analyze(surf, rt, cap, a, b)
       call new_sh_expansion_real(outer, a, b)
       best = cap
+      have_fit = .false.
       if (search) then
          call sh_synthesize(surf%grid, outer, fit)
          res = maxval(abs(rt - fit))
+         have_fit = .true.
          if (res <= target) then
+            have_fit = .false.
             lo = 0
             hi = cap
             do while (lo < hi)
@@ -352,13 +359,18 @@ contains
             best = lo
          end if
       end if
-      call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
-      call sh_synthesize(surf%grid, outer, fit)
+      if (.not. have_fit) then
+         ! (otherwise outer and fit already hold the full order cap)
+         call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
+         call sh_synthesize(surf%grid, outer, fit)
+      end if
       ! one-sided correction: lift the fit where it lies inside R_t (creases) until it lies inside
       ! by at most inside_tol t at every node
       allocate (da(0:best, 0:best), db(0:best, 0:best), deficit(size(rt, 1), size(rt, 2)))
       report%lifts = 0
-      do while (lift .and. maxval(rt - fit) > inside_tol * t .and. report%lifts < max_lifts)
+      factor = lift_factor
+      worst = maxval(rt - fit)
+      do while (lift .and. worst > inside_tol * t .and. report%lifts < max_lifts)
          ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
          ! sums over the violating nodes only when they are few (cost per node ~ order^2 against
@@ -368,11 +380,15 @@ contains
          else
             call grid_analyze(surf, deficit, best, da, db)
          end if
-         a(0:best, 0:best) = a(0:best, 0:best) + lift_factor * da
-         b(0:best, 0:best) = b(0:best, 0:best) + lift_factor * db
+         a(0:best, 0:best) = a(0:best, 0:best) + factor * da
+         b(0:best, 0:best) = b(0:best, 0:best) + factor * db
          call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
          call sh_synthesize(surf%grid, outer, fit)
          report%lifts = report%lifts + 1
+         previous = worst
+         worst = maxval(rt - fit)
+         ! slow progress (the projection spreads a narrow deficit thinly): lift harder next time
+         if (worst > 0.5_wp * previous) factor = min(max_lift_factor, 2.0_wp * factor)
       end do
       report%order = best
       report%fit_residual = maxval(abs(rt - fit))
@@ -394,22 +410,27 @@ contains
       real(wp), intent(in) :: f(:, :)
       integer, intent(in) :: nmax
       real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp), allocatable :: fc(:, :), fs(:, :)
-      integer :: i, m, k0, lm
+      real(wp), allocatable :: tt(:, :), fcs(:, :)
+      integer :: i, j, m, k0, lm
 
       lm = surf%grid%lmax
-      fc = matmul(f, transpose(surf%grid%trig(1:nmax + 1, :)))
+      ! contiguous (nphi, 2 nmax + 1) table of cos(m phi) then sin(m phi): one product in the
+      ! library's blocked path (a transposed section argument takes its slow strided path)
+      allocate (tt(size(f, 2), 2 * nmax + 1))
+      do j = 1, size(f, 2)
+         tt(j, 1:nmax + 1) = surf%grid%trig(1:nmax + 1, j)
+         tt(j, nmax + 2:2 * nmax + 1) = surf%grid%trig(lm + 2:lm + 1 + nmax, j)
+      end do
+      fcs = matmul(f, tt)
       a = 0.0_wp
       b = 0.0_wp
-      if (nmax > 0) fs = matmul(f, transpose(surf%grid%trig(lm + 2:lm + 1 + nmax, :)))
       do i = 1, size(f, 1)
-         fc(i, :) = fc(i, :) * surf%grid%sphere%weight(i)
-         if (nmax > 0) fs(i, :) = fs(i, :) * surf%grid%sphere%weight(i)
+         fcs(i, :) = fcs(i, :) * surf%grid%sphere%weight(i)
       end do
       do m = 0, nmax
          k0 = surf%grid%idx(m)
-         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fc(:, m + 1))
-         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fs(:, m))
+         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, m + 1))
+         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, nmax + 1 + m))
       end do
    end subroutine grid_analyze
 

@@ -20,8 +20,8 @@
 !>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_distance, &
-      & cross3
+   use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_frame_trig, &
+      & surface_distance, cross3
    implicit none
    private
 
@@ -44,6 +44,8 @@ module anm_shells_offset
    real(wp), parameter :: pole_sin = 1.0e-6_wp
    !> Points per call of `eval_surface_many`.
    integer, parameter :: eval_block = 256
+   !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
+   integer, parameter :: step_lanes = 32
 
    !> States of a Newton iteration (enumerator).
    type :: newton_state_enum
@@ -210,50 +212,85 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp), allocatable :: ts(:), ps(:), f(:, :), bt(:), bp(:), bf(:, :)
-      integer, allocatable :: state(:), run(:)
-      real(wp) :: u(3), e1(3), e2(3), rho, xf(3)
-      integer :: nt, np, n, k, i, j, it, nrun, b0, b1
+      real(wp), allocatable :: ts(:), ps(:), f(:, :), sc(:, :), bt(:), bp(:), bf(:, :), bsc(:, :)
+      integer, allocatable :: state(:), run(:), next(:)
+      real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
+      real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
+      real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
+      integer :: lstate(step_lanes)
+      integer :: nt, np, n, k, i, j, it, nrun, nnext, b0, b1, is, js, lm, l, nl
 
       nt = size(rt, 1)
       np = size(rt, 2)
       n = nt * np
-      allocate (ts(n), ps(n), f(6, n), state(n), run(n), bt(eval_block), bp(eval_block), bf(6, eval_block))
+      lm = surf%grid%lmax
+      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), next(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
+                bsc(4, eval_block))
       do j = 1, np
          do i = 1, nt
             k = i + (j - 1) * nt
-            ts(k) = surf%grid%sphere%theta(start(1, i, j))
-            ps(k) = surf%grid%sphere%phi(start(2, i, j))
-            f(:, k) = surf%f(:, start(1, i, j), start(2, i, j))
+            is = start(1, i, j)
+            js = start(2, i, j)
+            ts(k) = surf%grid%sphere%theta(is)
+            ps(k) = surf%grid%sphere%phi(js)
+            ! sin/cos of the start node from the grid's tables
+            sc(:, k) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
             state(k) = newton_state%running
          end do
       end do
       rt = 0.0_wp
       fx = 0.0_wp
+      nrun = n
+      run = [(k, k = 1, n)]
       do it = 1, max_newton
-         nrun = 0
-         do j = 1, np
-            do i = 1, nt
-               k = i + (j - 1) * nt
-               if (state(k) /= newton_state%running) cycle
-               call node_frame(surf, i, j, u, e1, e2)
-               call newton_update(u, e1, e2, t, surf%r(i, j), f(:, k), ts(k), ps(k), state(k), rho, xf)
-               if (state(k) == newton_state%running) then
-                  nrun = nrun + 1
-                  run(nrun) = k
-               else if (state(k) == newton_state%converged) then
-                  rt(i, j) = rho
-                  fx(:, i, j) = xf
+         ! one Newton step for the running directions, `step_lanes` at a time
+         nnext = 0
+         do b0 = 1, nrun, step_lanes
+            nl = min(step_lanes, nrun - b0 + 1)
+            do l = 1, step_lanes
+               ! short groups repeat their first direction (results discarded)
+               k = run(b0 + merge(l, 1, l <= nl) - 1)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
+               lrn(l) = surf%r(i, j)
+               if (it == 1) then
+                  ! the first step from the tabulated derivatives of the start sample
+                  lf(l, :) = surf%f(:, start(1, i, j), start(2, i, j))
+               else
+                  lf(l, :) = f(:, k)
+               end if
+               lsc(l, :) = sc(:, k)
+               lts(l) = ts(k)
+               lps(l) = ps(k)
+            end do
+            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+            do l = 1, nl
+               k = run(b0 + l - 1)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               ts(k) = lts(l)
+               ps(k) = lps(l)
+               state(k) = lstate(l)
+               if (lstate(l) == newton_state%running) then
+                  nnext = nnext + 1
+                  next(nnext) = k
+               else if (lstate(l) == newton_state%converged) then
+                  rt(i, j) = lrho(l)
+                  fx(:, i, j) = lxf(l, :)
                end if
             end do
          end do
+         nrun = nnext
+         run(1:nrun) = next(1:nrun)
          if (nrun == 0) exit
          do b0 = 1, nrun, eval_block
             b1 = min(nrun, b0 + eval_block - 1)
             bt(1:b1 - b0 + 1) = ts(run(b0:b1))
             bp(1:b1 - b0 + 1) = ps(run(b0:b1))
-            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1))
+            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1), bsc(:, 1:b1 - b0 + 1))
             f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
+            sc(:, run(b0:b1)) = bsc(:, 1:b1 - b0 + 1)
          end do
          nev = nev + nrun
       end do
@@ -308,20 +345,23 @@ contains
 
    !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
    !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
-   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by strips across the
+   !> The samples form cells (grid-adjacent quadruples, the polar caps closed by triangles to the
    !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
-   !> directions, so each cell's corners are tried on the direction nodes inside the (theta, phi)
-   !> box of those directions, widened by a quarter spacing. The node of every direction lies in
-   !> the image of the cell holding its true foot, whose corners are within one cell of it.
+   !> directions, so each cell's corners must be tried on the direction nodes inside the
+   !> (theta, phi) box of those directions, widened by a quarter spacing. The node of every
+   !> direction lies in the image of the cell holding its true foot, whose corners are within one
+   !> cell of it. Each sample is tried once on the box of the union of its (up to four) cells,
+   !> which holds every cell box it belongs to (near the poles, where a cell box is a whole ring,
+   !> a pair is then tried once instead of once per cell).
    pure subroutine sampled_starts(surf, t, lower, start)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t
       real(wp), intent(out) :: lower(:, :)
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
-      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, du, perp2, g, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2)
-      integer :: nt, np, i, j, ii, jj, ia, ja, jc, i0, i1, j0, ncol, kc, ci(4), cj(4), npc
+      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
+      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc
       logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
@@ -352,45 +392,38 @@ contains
       mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
-         jj = 1 + modulo(j, np)
-         do i = 0, nt
-            ! corners of the cell between rows i and i + 1 (rows 0 and nt + 1: across the pole)
-            ci = [i, i, i + 1, i + 1]
-            cj = [j, jj, j, jj]
-            do kc = 1, 4
-               if (ci(kc) < 1 .or. ci(kc) > nt) then
-                  ci(kc) = merge(1, nt, ci(kc) < 1)
-                  cj(kc) = 1 + modulo(cj(kc) - 1 + np / 2, np)
-               end if
-            end do
+         do i = 1, nt
+            ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
+            ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1,
+            ! and across a pole the pole's offset direction (the polar triangles). Every pair
+            ! (node, corner) of a cell box is in it; near the poles, where a cell's box is a whole
+            ! ring, each pair is tried once instead of once per cell.
+            ph0 = qph(i, j)
             thlo = pi
             thhi = 0.0_wp
             phlo = 0.0_wp
             phhi = 0.0_wp
-            npc = 4
-            if (i == 0 .or. i == nt) then
-               ! a polar triangle: two corners of the first (last) ring and the offset direction of
-               ! the pole, approximated by the mean offset point of that ring
-               npc = 2
-               ci(1:2) = merge(1, nt, i == 0)
-               cj(1:2) = [j, jj]
-               pole = pole_dir(:, merge(1, 2, i == 0))
+            do jc = -1, 1
+               jb = 1 + modulo(j + jc - 1, np)
+               do ii = max(1, i - 1), min(nt, i + 1)
+                  call widen(qth(ii, jb), qph(ii, jb), ph0, thlo, thhi, phlo, phhi)
+               end do
+            end do
+            if (i == 1 .or. i == nt) then
+               pole = pole_dir(:, merge(1, 2, i == 1))
                d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
                if (min(d, pi - d) < 0.5_wp * minval(surf%grid%sphere%theta)) then
                   ! at the pole itself (closer than any node): its azimuth is meaningless
                   thlo = min(thlo, d)
                   thhi = max(thhi, d)
                else
-                  call widen(d, atan2(pole(2), pole(1)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
+                  call widen(d, atan2(pole(2), pole(1)), ph0, thlo, thhi, phlo, phhi)
                end if
             end if
-            do kc = 1, npc
-               call widen(qth(ci(kc), cj(kc)), qph(ci(kc), cj(kc)), qph(ci(1), cj(1)), thlo, thhi, phlo, phhi)
-            end do
             all_phi = phhi - phlo > pi
             if (all_phi) then
                ! the patch holds a pole
-               if (qd(3, ci(1), cj(1)) > 0.0_wp) then
+               if (qd(3, i, j) > 0.0_wp) then
                   thlo = 0.0_wp
                else
                   thhi = pi
@@ -401,33 +434,34 @@ contains
                j0 = 1
                ncol = np
             else
-               phlo = qph(ci(1), cj(1)) + phlo - mph
-               phhi = qph(ci(1), cj(1)) + phhi + mph
+               phlo = ph0 + phlo - mph
+               phhi = ph0 + phhi + mph
                j0 = ceiling(phlo / dphi) + 1
                ncol = floor(phhi / dphi) + 2 - j0
             end if
+            xs = surf%x(:, i, j)
+            xxs = xx(i, j)
             do jc = 1, ncol
                ja = 1 + modulo(j0 + jc - 2, np)
                do ia = i0, i1
-                  do kc = 1, npc
-                     ii = ci(kc)
-                     du = dot_product(surf%u(:, ia, ja), surf%x(:, ii, cj(kc)))
-                     perp2 = xx(ii, cj(kc)) - du * du
-                     if (perp2 < t2) then
-                        ! g = du + sqrt(t2 - perp2) > lower, without the square root unless it is
-                        g = lower(ia, ja) - du
-                        if (g < 0.0_wp .or. t2 - perp2 > g * g) then
-                           lower(ia, ja) = du + sqrt(t2 - perp2)
-                           start(:, ia, ja) = [ii, cj(kc)]
-                        end if
-                     else if (lower(ia, ja) == -huge(1.0_wp)) then
-                        c = dot_product(surf%u(:, ia, ja), qd(:, ii, cj(kc)))
-                        if (c > align(ia, ja)) then
-                           align(ia, ja) = c
-                           start(:, ia, ja) = [ii, cj(kc)]
-                        end if
+                  du = surf%u(1, ia, ja) * xs(1) + surf%u(2, ia, ja) * xs(2) + surf%u(3, ia, ja) * xs(3)
+                  perp2 = xxs - du * du
+                  if (perp2 < t2) then
+                     ! g_u = du + sqrt(t^2 - perp^2) > bound, decided without the square root
+                     ! (dd clamped below so that an unset bound does not overflow)
+                     dd = max(lower(ia, ja) - du, -1.0_wp)
+                     if (dd < 0.0_wp .or. t2 - perp2 > dd * dd) then
+                        lower(ia, ja) = du + sqrt(t2 - perp2)
+                        start(:, ia, ja) = [i, j]
                      end if
-                  end do
+                  else if (lower(ia, ja) == -huge(1.0_wp)) then
+                     ! no sample within t of this ray yet: the best-aligned offset direction
+                     c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
+                     if (c > align(ia, ja)) then
+                        align(ia, ja) = c
+                        start(:, ia, ja) = [i, j]
+                     end if
+                  end if
                end do
             end do
          end do
@@ -441,7 +475,13 @@ contains
       real(wp) :: d
       thlo = min(thlo, th)
       thhi = max(thhi, th)
-      d = modulo(ph - ph0 + pi, two_pi) - pi
+      ! ph and ph0 are atan2 values in [-pi, pi]: one turn at most brings d into [-pi, pi)
+      d = ph - ph0
+      if (d >= pi) then
+         d = d - two_pi
+      else if (d < -pi) then
+         d = d + two_pi
+      end if
       phlo = min(phlo, d)
       phhi = max(phhi, d)
    end subroutine widen
@@ -469,21 +509,21 @@ contains
       end if
    end subroutine row_range
 
-   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none).
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): a guess from the
+   !> asymptotic Gauss-Legendre nodes, theta_i ~ pi (i - 1/4) / (n + 1/2), corrected by a walk.
    pure function first_at_least(theta, v) result(k)
       real(wp), intent(in) :: theta(:), v
-      integer :: k, lo, hi, mid
-      lo = 1
-      hi = size(theta) + 1
-      do while (lo < hi)
-         mid = (lo + hi) / 2
-         if (theta(mid) >= v) then
-            hi = mid
-         else
-            lo = mid + 1
-         end if
+      integer :: k, n
+      n = size(theta)
+      k = max(1, min(n, nint(v * (n + 0.5_wp) / pi + 0.25_wp)))
+      do while (k > 1)
+         if (theta(k - 1) < v) exit
+         k = k - 1
       end do
-      k = lo
+      do while (k <= n)
+         if (theta(k) >= v) exit
+         k = k + 1
+      end do
    end function first_at_least
 
    !> Newton-Raphson for Eq 2.1 along u (theta-hat e1, phi-hat e2 span the plane perpendicular to
@@ -512,7 +552,7 @@ contains
          nev = 1
       end if
       do it = 1, max_newton
-         call newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
+         call newton_update(u, e1, e2, t, rnode, f, [sin(ts), cos(ts), sin(ps), cos(ps)], ts, ps, state, rho, xf)
          if (state /= newton_state%running) exit
          call eval_surface(surf, ts, ps, f)
          nev = nev + 1
@@ -525,8 +565,8 @@ contains
    !> x_p dp + second-order terms), and state = converged if the local conditions hold (beta > 0 with
    !> rnode = r(u), u . n > 0, strict local minimum of the distance: 1 - t kappa_i > 0), else failed.
    !> Otherwise (ts, ps) takes the (damped) step and state = running (failed near the poles).
-   pure subroutine newton_update(u, e1, e2, t, rnode, f, ts, ps, state, rho, xf)
-      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6)
+   pure subroutine newton_update(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(3), e1(3), e2(3), t, rnode, f(6), sc(4)
       real(wp), intent(inout) :: ts, ps
       integer, intent(out) :: state
       real(wp), intent(out) :: rho, xf(3)
@@ -537,13 +577,13 @@ contains
       state = newton_state%failed
       rho = 0.0_wp
       xf = 0.0_wp
-      call surface_frame(ts, ps, f, x, xt, xp, xtt, xtp, xpp)
-      sgn = sign(1.0_wp, sin(ts))
-      nv = sgn * cross3(xt, xp)
+      call surface_frame_trig(sc, f, x, xt, xp, xtt, xtp, xpp)
+      sgn = sign(1.0_wp, sc(1))
+      nv = sgn * cross(xt, xp)
       nn = sqrt(dot_product(nv, nv))
       nh = nv / nn
-      nt = sgn * (cross3(xtt, xp) + cross3(xt, xtp))
-      np = sgn * (cross3(xtp, xp) + cross3(xt, xpp))
+      nt = sgn * (cross(xtt, xp) + cross(xt, xtp))
+      np = sgn * (cross(xtp, xp) + cross(xt, xpp))
       nt = (nt - nh * dot_product(nh, nt)) / nn
       np = (np - nh * dot_product(nh, np)) / nn
       q = x + t * nh
@@ -580,6 +620,139 @@ contains
       ps = ps + lam * dp
       if (abs(sin(ts)) >= pole_sin) state = newton_state%running
    end subroutine newton_update
+
+   !> `newton_update` for `step_lanes` directions at once (one direction per lane; arrays
+   !> (lane, component), branches as masks), the same arithmetic and the same outcomes.
+   pure subroutine newton_lanes(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: u(step_lanes, 3), e1(step_lanes, 3), e2(step_lanes, 3), t, rnode(step_lanes)
+      real(wp), intent(in) :: f(step_lanes, 6), sc(step_lanes, 4)
+      real(wp), intent(inout) :: ts(step_lanes), ps(step_lanes)
+      integer, intent(out) :: state(step_lanes)
+      real(wp), intent(out) :: rho(step_lanes), xf(step_lanes, 3)
+      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2
+      real(wp), dimension(step_lanes) :: st, ct, sp, cp, sgn, nn, inn, dnt, dnp, f1, f2, j11, j12, j21, j22, det, &
+                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1
+      logical, dimension(step_lanes) :: good, finish, ok
+      integer :: c
+
+      st = sc(:, 1)
+      ct = sc(:, 2)
+      sp = sc(:, 3)
+      cp = sc(:, 4)
+      rh(:, 1) = st * cp
+      rh(:, 2) = st * sp
+      rh(:, 3) = ct
+      th(:, 1) = ct * cp
+      th(:, 2) = ct * sp
+      th(:, 3) = -st
+      r1 = f(:, 1)
+      do c = 1, 3
+         x(:, c) = r1 * rh(:, c)
+         xt(:, c) = f(:, 2) * rh(:, c) + r1 * th(:, c)
+         xtt(:, c) = (f(:, 4) - r1) * rh(:, c) + 2.0_wp * f(:, 2) * th(:, c)
+         xtp(:, c) = f(:, 5) * rh(:, c) + f(:, 3) * th(:, c)
+         xpp(:, c) = f(:, 6) * rh(:, c)
+         xp(:, c) = f(:, 3) * rh(:, c)
+      end do
+      ! phi-hat = (-sin phi, cos phi, 0) and rho-hat = (cos phi, sin phi, 0) terms
+      a = f(:, 2) * st + r1 * ct
+      xp(:, 1) = xp(:, 1) - r1 * st * sp
+      xp(:, 2) = xp(:, 2) + r1 * st * cp
+      xtp(:, 1) = xtp(:, 1) - a * sp
+      xtp(:, 2) = xtp(:, 2) + a * cp
+      xpp(:, 1) = xpp(:, 1) - 2.0_wp * f(:, 3) * st * sp - r1 * st * cp
+      xpp(:, 2) = xpp(:, 2) + 2.0_wp * f(:, 3) * st * cp - r1 * st * sp
+      sgn = sign(1.0_wp, st)
+      call cross_lanes(xt, xp, nv)
+      call cross_lanes(xtt, xp, nt)
+      call cross_lanes(xt, xtp, q)
+      call cross_lanes(xtp, xp, np)
+      call cross_lanes(xt, xpp, qt)
+      do c = 1, 3
+         nv(:, c) = sgn * nv(:, c)
+         nt(:, c) = sgn * (nt(:, c) + q(:, c))
+         np(:, c) = sgn * (np(:, c) + qt(:, c))
+      end do
+      nn = sqrt(nv(:, 1)**2 + nv(:, 2)**2 + nv(:, 3)**2)
+      inn = 1.0_wp / nn
+      do c = 1, 3
+         nh(:, c) = nv(:, c) * inn
+      end do
+      dnt = nh(:, 1) * nt(:, 1) + nh(:, 2) * nt(:, 2) + nh(:, 3) * nt(:, 3)
+      dnp = nh(:, 1) * np(:, 1) + nh(:, 2) * np(:, 2) + nh(:, 3) * np(:, 3)
+      do c = 1, 3
+         nt(:, c) = (nt(:, c) - nh(:, c) * dnt) * inn
+         np(:, c) = (np(:, c) - nh(:, c) * dnp) * inn
+         q(:, c) = x(:, c) + t * nh(:, c)
+         qt(:, c) = xt(:, c) + t * nt(:, c)
+         qp(:, c) = xp(:, c) + t * np(:, c)
+      end do
+      f1 = dot_lanes(q, e1)
+      f2 = dot_lanes(q, e2)
+      j11 = dot_lanes(qt, e1)
+      j12 = dot_lanes(qp, e1)
+      j21 = dot_lanes(qt, e2)
+      j22 = dot_lanes(qp, e2)
+      det = j11 * j22 - j12 * j21
+      good = abs(det) > tiny(det) * 1.0e10_wp
+      det = merge(det, 1.0_wp, good)
+      dt = -(j22 * f1 - j12 * f2) / det
+      dp = -(j11 * f2 - j21 * f1) / det
+      big = max(abs(dt), abs(dp))
+      finish = good .and. big <= finish_step
+      ! finished lanes: local conditions and the second-order Taylor root
+      h11 = dot_lanes(xt, xt) - t * dot_lanes(nh, xtt)
+      h12 = dot_lanes(xt, xp) - t * dot_lanes(nh, xtp)
+      h22 = dot_lanes(xp, xp) - t * dot_lanes(nh, xpp)
+      cu = dot_lanes(nh, u)
+      do c = 1, 3
+         x2(:, c) = x(:, c) + xt(:, c) * dt + xp(:, c) * dp + 0.5_wp * (xtt(:, c) * dt * dt &
+                    + 2.0_wp * xtp(:, c) * dt * dp + xpp(:, c) * dp * dp)
+      end do
+      du = dot_lanes(u, x2)
+      perp2 = max(0.0_wp, dot_lanes(x2, x2) - du * du)
+      ok = finish .and. h11 > 0.0_wp .and. h11 * h22 - h12 * h12 > 0.0_wp .and. cu > 0.0_wp .and. perp2 <= t * t
+      rho = merge(du + sqrt(max(0.0_wp, t * t - perp2)), 0.0_wp, ok)
+      do c = 1, 3
+         xf(:, c) = merge(x2(:, c), 0.0_wp, ok)
+      end do
+      ! running lanes: the damped step
+      lam = min(1.0_wp, 0.2_wp / merge(big, 1.0_wp, good .and. .not. finish))
+      lam = merge(lam, 1.0_wp, .not. finish)
+      where (ok .or. (good .and. .not. finish))
+         ts = ts + lam * dt
+         ps = ps + lam * dp
+      end where
+      state = newton_state%failed
+      where (ok .and. rho > rnode) state = newton_state%converged
+      where (good .and. .not. finish)
+         state = merge(newton_state%running, newton_state%failed, abs(sin(ts)) >= pole_sin)
+      end where
+   end subroutine newton_lanes
+
+   !> c = a x b per lane.
+   pure subroutine cross_lanes(a, b, c)
+      real(wp), intent(in) :: a(:, :), b(:, :)
+      real(wp), intent(out) :: c(:, :)
+      c(:, 1) = a(:, 2) * b(:, 3) - a(:, 3) * b(:, 2)
+      c(:, 2) = a(:, 3) * b(:, 1) - a(:, 1) * b(:, 3)
+      c(:, 3) = a(:, 1) * b(:, 2) - a(:, 2) * b(:, 1)
+   end subroutine cross_lanes
+
+   !> a . b per lane.
+   pure function dot_lanes(a, b) result(d)
+      real(wp), intent(in) :: a(:, :), b(:, :)
+      real(wp) :: d(size(a, 1))
+      d = a(:, 1) * b(:, 1) + a(:, 2) * b(:, 2) + a(:, 3) * b(:, 3)
+   end function dot_lanes
+
+   !> Cross product (the module's own copy of `cross3`, so that the compiler inlines it in the
+   !> Newton step).
+   pure function cross(a, b) result(c)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: c(3)
+      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+   end function cross
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

@@ -14,12 +14,16 @@
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_grid_normals, sh_synthesize
+   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
    implicit none
    private
 
+   !> Points per group of `eval_surface_many` (four AVX-512 registers per quantity: independent
+   !> recurrence chains, all in L1; 8 and 16 were slower, 64 no better).
+   integer, parameter :: lanes = 32
+
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
-      & surface_distance, closest_point, cross3
+      & surface_frame_trig, surface_distance, closest_point, cross3
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -61,7 +65,7 @@ contains
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
       integer :: n, m, k, i, j, nt, np, jn
-      real(wp) :: rn, rm, h
+      real(wp) :: rn, rm, h, st, ct, cp, sp, rh(3), th(3), ph(3), v(3)
 
       surf%shape = shape
       allocate (surf%enm(size(shape%table%ca)))
@@ -77,8 +81,24 @@ contains
       nt = ntheta
       np = 2 * ntheta
       surf%grid = new_sh_grid(nt, np, max(lmax, shape%nmax, 2))
-      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np))
-      call sh_grid_normals(surf%grid, shape, surf%x, surf%n)
+      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np), surf%u(3, nt, np))
+      ! r and its derivatives, then points and normals from the same syntheses (as `sh_grid_normals`;
+      ! surf%r holds (dr/dphi) / sin(theta) until the radii are set below)
+      call grid_derivatives(surf%grid, shape, surf%f, surf%r)
+      do j = 1, np
+         cp = cos(surf%grid%sphere%phi(j))
+         sp = sin(surf%grid%sphere%phi(j))
+         do i = 1, nt
+            st = surf%grid%sphere%sint(i)
+            ct = surf%grid%sphere%x(i)
+            rh = [st * cp, st * sp, ct]
+            th = [ct * cp, ct * sp, -st]
+            ph = [-sp, cp, 0.0_wp]
+            surf%x(:, i, j) = surf%f(1, i, j) * rh
+            v = surf%f(1, i, j) * rh - surf%f(2, i, j) * th - surf%r(i, j) * ph
+            surf%n(:, i, j) = v / norm2(v)
+         end do
+      end do
       h = 0.0_wp
       do j = 1, np
          jn = 1 + mod(j, np)
@@ -99,8 +119,6 @@ contains
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
-      allocate (surf%f(6, nt, np), surf%u(3, nt, np))
-      call grid_derivatives(surf%grid, shape, surf%f)
       do j = 1, np
          do i = 1, nt
             surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
@@ -112,13 +130,15 @@ contains
    !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
    !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
    !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
-   pure subroutine grid_derivatives(grid, shape, f)
+   pure subroutine grid_derivatives(grid, shape, f, r_phi_sin)
       !> Grid with tables.
       type(sh_grid_type), intent(in) :: grid
       !> Expansion.
       type(sh_expansion_type), intent(in) :: shape
       !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
       real(wp), intent(out) :: f(:, :, :)
+      !> (dr/dphi) / sin(theta) at the nodes (for the normals).
+      real(wp), intent(out) :: r_phi_sin(:, :)
       type(sh_expansion_type) :: dphi, dphi2, lap
       real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
       integer :: n, m, nmax, nt, np, i
@@ -149,7 +169,7 @@ contains
          end do
       end do
       call new_sh_expansion_real(lap, a, b)
-      call sh_synthesize(grid, shape, w1, w2, w3, nused=nmax)
+      call sh_synthesize(grid, shape, w1, w2, r_phi_sin, nused=nmax)
       f(1, :, :) = w1
       f(2, :, :) = w2
       call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
@@ -247,31 +267,63 @@ contains
    end subroutine eval_surface
 
    !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
-   !> with the points innermost (vectorised), for blocks of a few hundred points.
-   pure subroutine eval_surface_many(surf, theta, phi, f)
+   !> on groups of `lanes` points held in fixed-size arrays (one vector register per quantity).
+   pure subroutine eval_surface_many(surf, theta, phi, f, sc)
       !> Surface data.
       type(shell_surface_type), intent(in) :: surf
       !> Polar angles and azimuths (|sin(theta)| not tiny).
       real(wp), intent(in) :: theta(:), phi(:)
       !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
       real(wp), intent(out) :: f(:, :)
+      !> sc(:, k) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
+      real(wp), intent(out), optional :: sc(:, :)
+      real(wp) :: th(lanes), ph(lanes), fl(6, lanes), scl(4, lanes)
+      integer :: k0, nk
+
+      do k0 = 1, size(theta), lanes
+         nk = min(lanes, size(theta) - k0 + 1)
+         ! a short last group is padded with the equator (any point with sin(theta) away from 0)
+         th = 0.5_wp * pi
+         ph = 0.0_wp
+         th(1:nk) = theta(k0:k0 + nk - 1)
+         ph(1:nk) = phi(k0:k0 + nk - 1)
+         call eval_lanes(surf, th, ph, fl, scl)
+         f(:, k0:k0 + nk - 1) = fl(:, 1:nk)
+         if (present(sc)) sc(:, k0:k0 + nk - 1) = scl(:, 1:nk)
+      end do
+   end subroutine eval_surface_many
+
+   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`).
+   pure subroutine eval_lanes(surf, theta, phi, f, sc)
+      type(shell_surface_type), intent(in) :: surf
+      real(wp), intent(in) :: theta(lanes), phi(lanes)
+      real(wp), intent(out) :: f(6, lanes), sc(4, lanes)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
-      real(wp), dimension(size(theta)) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
-                                          a0, b0, a1, b1, ann, bnn
-      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq
+      real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
+                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, q
+      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq, rm
       integer :: m, n, k0, nmax
 
       x = cos(theta)
       s = sin(theta)
       cp = cos(phi)
       sp = sin(phi)
+      sc(1, :) = s
+      sc(2, :) = x
+      sc(3, :) = sp
+      sc(4, :) = cp
       inv_s = 1.0_wp / s
       cots = x * inv_s
       nmax = surf%shape%nmax
       pmm = inv_sqrt_4pi
       cm = 1.0_wp
       sm = 0.0_wp
-      f = 0.0_wp
+      f1 = 0.0_wp
+      f2 = 0.0_wp
+      f3 = 0.0_wp
+      f4 = 0.0_wp
+      f5 = 0.0_wp
+      f6 = 0.0_wp
       do m = 0, nmax
          if (m > 0) then
             pmm = -surf%shape%table%sect(m) * s * pmm
@@ -312,16 +364,23 @@ contains
             ann = ann + (an * nn1) * p1
             bnn = bnn + (bn * nn1) * p1
          end do
-         msq = real(m * m, wp)
-         f(1, :) = f(1, :) + a0 * cm + b0 * sm
-         f(2, :) = f(2, :) + a1 * cm + b1 * sm
-         f(3, :) = f(3, :) + m * (b0 * cm - a0 * sm)
-         f(4, :) = f(4, :) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm &
-                   + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
-         f(5, :) = f(5, :) + m * (b1 * cm - a1 * sm)
-         f(6, :) = f(6, :) - msq * (a0 * cm + b0 * sm)
+         rm = real(m, wp)
+         msq = rm * rm
+         q = msq * inv_s * inv_s
+         f1 = f1 + a0 * cm + b0 * sm
+         f2 = f2 + a1 * cm + b1 * sm
+         f3 = f3 + rm * (b0 * cm - a0 * sm)
+         f4 = f4 + (-cots * a1 - ann + q * a0) * cm + (-cots * b1 - bnn + q * b0) * sm
+         f5 = f5 + rm * (b1 * cm - a1 * sm)
+         f6 = f6 - msq * (a0 * cm + b0 * sm)
       end do
-   end subroutine eval_surface_many
+      f(1, :) = f1
+      f(2, :) = f2
+      f(3, :) = f3
+      f(4, :) = f4
+      f(5, :) = f5
+      f(6, :) = f6
+   end subroutine eval_lanes
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
    !> x, x_t, x_p, x_tt, x_tp, x_pp (Cartesian, body frame).
@@ -332,11 +391,23 @@ contains
       real(wp), intent(in) :: f(6)
       !> Point, first and second derivatives.
       real(wp), intent(out) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3)
+      call surface_frame_trig([sin(theta), cos(theta), sin(phi), cos(phi)], f, x, xt, xp, xtt, xtp, xpp)
+   end subroutine surface_frame
+
+   !> `surface_frame` from the sines and cosines of the direction, sc = [sin theta, cos theta,
+   !> sin phi, cos phi] (as returned by `eval_surface_many`), without trigonometric calls.
+   pure subroutine surface_frame_trig(sc, f, x, xt, xp, xtt, xtp, xpp)
+      !> sin(theta), cos(theta), sin(phi), cos(phi).
+      real(wp), intent(in) :: sc(4)
+      !> r and derivatives from eval_surface.
+      real(wp), intent(in) :: f(6)
+      !> Point, first and second derivatives.
+      real(wp), intent(out) :: x(3), xt(3), xp(3), xtt(3), xtp(3), xpp(3)
       real(wp) :: st, ct, sp, cp, rh(3), th(3), ph(3), rho(3)
-      st = sin(theta)
-      ct = cos(theta)
-      sp = sin(phi)
-      cp = cos(phi)
+      st = sc(1)
+      ct = sc(2)
+      sp = sc(3)
+      cp = sc(4)
       rh = [st * cp, st * sp, ct]
       th = [ct * cp, ct * sp, -st]
       ph = [-sp, cp, 0.0_wp]
@@ -347,7 +418,7 @@ contains
       xtt = (f(4) - f(1)) * rh + 2.0_wp * f(2) * th
       xtp = f(5) * rh + f(3) * th + (f(2) * st + f(1) * ct) * ph
       xpp = f(6) * rh + 2.0_wp * f(3) * st * ph - f(1) * st * rho
-   end subroutine surface_frame
+   end subroutine surface_frame_trig
 
    !> Cross product.
    pure function cross3(a, b) result(c)
