@@ -13,7 +13,8 @@ sieves) A_ik^s. The small-particle fraction of layer k (Eq 3.10) and g (Eq 3.11)
 
 Per-slice values g_ik = A_ik^s / (A_ik phi_B) over the slices that cut layer k give the mean and
 standard deviation plotted as error bars (Fig 3.8); the standard error of g_k is that of a ratio
-estimator over those slices. `volume_fractions` estimates phi_k directly in the volume with
+estimator over blocks of consecutive slices spanning the widest small particle (closer slices cut
+the same particles and are not independent). `volume_fractions` estimates phi_k directly in the volume with
 uniform Monte Carlo points (no slices), so Eq 3.11 can be checked numerically.
 
 Library API:
@@ -223,6 +224,7 @@ class _Setup:
     own: Slicer
     lo: np.ndarray
     hi: np.ndarray
+    width: float
 
 
 def _setup(model: Model, spec: RdfSpec) -> _Setup:
@@ -246,7 +248,8 @@ def _setup(model: Model, spec: RdfSpec) -> _Setup:
     own = Slicer(one, ShellSpec(tuple(t_mm / length), unit="fraction", particles=(0,)))
     lo, hi = particle_extent(model, pid)
     margin = t_mm[-1] + 0.01 * length + 2 * spec.pixel
-    return _Setup(pid, length, t_mm, small, float(phi_b), full, own, lo - margin, hi + margin)
+    width = float(np.max(np.asarray(model.sieves["max_width"], float)[list(small)]))
+    return _Setup(pid, length, t_mm, small, float(phi_b), full, own, lo - margin, hi + margin, width)
 
 
 def _planes(st: _Setup, spec: RdfSpec, density: float) -> list[Plane]:
@@ -281,13 +284,18 @@ def _count(st: _Setup, planes: list[Plane], chunk: int = 8) -> np.ndarray:
     return out
 
 
-def _summarise(counts: np.ndarray, phi_b: float) -> dict[str, np.ndarray]:
-    """Eq 3.10/3.11 and the per-slice statistics from counts (nslice, K, 2)."""
+def _summarise(counts: np.ndarray, phi_b: float, block: int = 1) -> dict[str, np.ndarray]:
+    """Eq 3.10/3.11 and the per-slice statistics from counts (nslice, K, 2). The standard error of
+    g is that of a ratio estimator over blocks of `block` consecutive slices (slices closer than a
+    small particle's width see the same particles, so single slices are not independent)."""
     area, small = counts[:, :, 0].astype(float), counts[:, :, 1].astype(float)
     A, S = area.sum(axis=0), small.sum(axis=0)
     K = counts.shape[1]
     phi = np.where(A > 0, S / np.maximum(A, 1), np.nan)
     mean, sd, se, n = (np.full(K, np.nan) for _ in range(4))
+    nb = -(-len(counts) // block)
+    edges = np.arange(nb) * block
+    barea, bsmall = np.add.reduceat(area, edges, axis=0), np.add.reduceat(small, edges, axis=0)
     for k in range(K):
         ok = area[:, k] > 0
         n[k] = ok.sum()
@@ -297,9 +305,21 @@ def _summarise(counts: np.ndarray, phi_b: float) -> dict[str, np.ndarray]:
         mean[k] = gi.mean()
         if n[k] > 1:
             sd[k] = gi.std(ddof=1)
-            resid = small[ok, k] - phi[k] * area[ok, k]
-            se[k] = np.sqrt(np.sum(resid ** 2) / (n[k] * (n[k] - 1))) / area[ok, k].mean() / phi_b
+        bok = barea[:, k] > 0
+        m = bok.sum()
+        if m > 1:
+            resid = bsmall[bok, k] - phi[k] * barea[bok, k]
+            se[k] = np.sqrt(np.sum(resid ** 2) / (m * (m - 1))) / barea[bok, k].mean() / phi_b
     return dict(phi=phi, g=phi / phi_b, g_mean=mean, g_sd=sd, g_se=se, n_slices=n, area=A, small=S)
+
+
+def _block(st: "_Setup", planes: list[Plane], axis: str) -> int:
+    """Slices per block for the standard error: enough to span the widest small particle."""
+    if len(planes) < 2:
+        return 1
+    k = _AXES[axis]
+    spacing = abs(planes[1].origin[k] - planes[0].origin[k])
+    return max(1, int(np.ceil(st.width / spacing - 1e-9)))
 
 
 def rdf(model: Model, spec: RdfSpec = RdfSpec()) -> RdfResult:
@@ -308,7 +328,7 @@ def rdf(model: Model, spec: RdfSpec = RdfSpec()) -> RdfResult:
     st = _setup(model, spec)
     planes = _planes(st, spec, spec.density)
     counts = _count(st, planes)
-    s = _summarise(counts, st.phi_b)
+    s = _summarise(counts, st.phi_b, _block(st, planes, spec.axis))
     k = _AXES[spec.axis]
     t_in = np.concatenate([[0.0], st.t_mm[:-1]])
     return RdfResult(particle=st.pid, length=st.length, phi_b=st.phi_b, small_sieves=st.small, density=spec.density,
@@ -493,7 +513,7 @@ def convergence(model: Model, spec: RdfSpec = RdfSpec(),
     results = []
     for d, planes in zip(dens, per):
         c = counts[[index[round(p.origin[k], 9)] for p in planes]]
-        s = _summarise(c, st.phi_b)
+        s = _summarise(c, st.phi_b, _block(st, planes, spec.axis))
         results.append(RdfResult(particle=st.pid, length=st.length, phi_b=st.phi_b, small_sieves=st.small,
                                  density=float(d), pixel=spec.pixel, axis=spec.axis,
                                  positions=np.array([p.origin[k] for p in planes]), t_inner=t_in,
@@ -502,3 +522,72 @@ def convergence(model: Model, spec: RdfSpec = RdfSpec(),
     for r in results:
         r.seconds = elapsed
     return ConvergenceResult(dens, results)
+
+
+# -- plots -------------------------------------------------------------------------------------
+def _figure():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, plt, path: str | Path, option: str) -> Path:
+    path = Path(path)
+    try:
+        fig.savefig(path, dpi=150)
+    except OSError as exc:
+        raise AnmPostError(f"{path}: cannot write PNG ({option}): {exc}") from None
+    finally:
+        plt.close(fig)
+    return path
+
+
+def plot_rdf(res: RdfResult, path: str | Path, volume: VolumeResult | None = None, title: str = "") -> Path:
+    """Bar plot of g per layer (bar width = layer thickness) with the per-slice standard deviation as
+    error bars (thesis Fig 3.8); the 3D Monte Carlo values as points when given; g = 1 dashed."""
+    plt = _figure()
+    fig, ax = plt.subplots(figsize=(6.4, 4))
+    width = res.t_outer - res.t_inner
+    ax.bar(res.t_inner, res.g, width=width, align="edge", color="#9ecae1", edgecolor="#3182bd",
+           label=f"slices (rho_s = {res.density:g}, N = {len(res.positions)})")
+    ax.errorbar(res.t_mid, res.g, yerr=res.g_sd, fmt="none", ecolor="#08306b", capsize=3, label="per-slice s.d.")
+    if volume is not None:
+        ax.errorbar(res.t_mid, volume.phi / res.phi_b, yerr=volume.phi_se / res.phi_b, fmt="o", ms=4,
+                    color="#d62728", capsize=2, label="3D (Monte Carlo)")
+    ax.axhline(1.0, ls="--", color="grey", lw=1)
+    ax.set_xlabel("distance t from the particle surface (mm)")
+    ax.set_ylabel("g(t) = phi_shell / phi_B")
+    ax.set_title(title or f"g(t) around particle {res.particle} (L = {res.length:.3g} mm, "
+                          f"phi_B = {res.phi_b:.3f}, R_s = {res.pixel:g} mm)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, plt, path, "--png")
+
+
+def plot_convergence(conv: ConvergenceResult, path: str | Path, layers: Sequence[int] | None = None) -> Path:
+    """Two panels: g(t) per layer for each slice density (thesis Figs 3.9/3.12) and the standard
+    deviation of the per-slice g against rho_s for chosen layers (1-based; Figs 3.10/3.13)."""
+    plt = _figure()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    for r in conv.results:
+        a1.plot(r.t_mid, r.g, marker="o", ms=3, label=f"rho_s = {r.density:g} (N = {len(r.positions)})")
+    a1.axhline(1.0, ls="--", color="grey", lw=1)
+    a1.set_xlabel("distance t from the particle surface (mm)")
+    a1.set_ylabel("g(t)")
+    a1.legend(fontsize=7)
+    r0 = conv.results[0]
+    K = len(r0.g)
+    layers = list(layers) if layers else sorted({1, max(1, K // 3), max(1, 2 * K // 3), K})
+    for k in layers:
+        if not 1 <= k <= K:
+            raise AnmPostError(f"layer {k} outside 1..{K} (--layers)")
+        sd = [r.g_sd[k - 1] for r in conv.results]
+        a2.plot(conv.densities, sd, marker="o", ms=3, label=f"t = {r0.t_mid[k - 1]:.3f} mm (layer {k})")
+    a2.set_xscale("log")
+    a2.set_xlabel("slice density rho_s")
+    a2.set_ylabel("standard deviation of g over slices")
+    a2.legend(fontsize=7)
+    fig.suptitle(f"Convergence in rho_s, particle {r0.particle}, R_s = {r0.pixel:g} mm", fontsize=9)
+    fig.tight_layout()
+    return _save(fig, plt, path, "--png")
