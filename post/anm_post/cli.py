@@ -194,9 +194,16 @@ def _rdf_spec(args: argparse.Namespace):
         except ValueError:
             raise AnmPostError(f"--sieves: expected comma-separated 0-based sieve numbers, got {args.sieves!r}") \
                 from None
-    return RdfSpec(particle=args.particle, n_shells=args.shells, t_min=args.t_min, t_max=args.t_max, unit=args.unit,
-                   axis=args.axis, pixel=args.pixel, density=getattr(args, "density", 1.0), small_sieves=sieves,
-                   small_below=args.below, phi_b=args.phi_b)
+    try:
+        return RdfSpec(particle=args.particle, n_shells=args.shells, t_min=args.t_min, t_max=args.t_max,
+                       unit=args.unit, axis=args.axis, pixel=args.pixel, density=getattr(args, "density", 1.0),
+                       small_sieves=sieves, small_below=args.below, phi_b=args.phi_b)
+    except AnmPostError as exc:
+        text = str(exc)
+        option = next((o for key, o in (("number of shells", "--shells"), ("shell distances", "--t-min/--t-max"),
+                                        ("pixel", "--pixel"), ("density", "--density"), ("bulk", "--phi-b"))
+                       if key in text), "options")
+        raise AnmPostError(f"{option}: {text}") from None
 
 
 def _check_particle(args: argparse.Namespace, model) -> None:
@@ -248,6 +255,9 @@ def _cmd_convergence(args: argparse.Namespace) -> int:
         conv.to_csv(args.csv)
     if args.png:
         plot_convergence(conv, args.png, layers)
+    if args.rdf_png:
+        from .walleffect import plot_rdf
+        plot_rdf(conv.results[-1], args.rdf_png)
     return 0
 
 
@@ -336,6 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--densities", default="0.01,0.05,0.1,0.25,0.5,1", metavar="R1,R2..",
                    help="slice densities (default 0.01,0.05,0.1,0.25,0.5,1)")
     p.add_argument("--layers", metavar="K1,K2..", help="1-based layers of the s.d. panel (default: 4 spread layers)")
+    p.add_argument("--rdf-png", metavar="FILE", help="also the bar plot of g(t) (Fig 3.8) at the highest density")
     p.set_defaults(func=_cmd_convergence)
     return parser
 

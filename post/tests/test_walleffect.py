@@ -174,6 +174,9 @@ def test_cli_rdf_and_errors(tmp_path, capsys):
     assert main(["rdf", str(tmp_path / "s.h5"), "--particle", "99999"]) == 1
     assert "--particle" in capsys.readouterr().err
     assert main(["rdf", str(tmp_path / "s.h5"), "--density", "2"]) == 1
+    assert "--density" in capsys.readouterr().err
+    assert main(["rdf", str(tmp_path / "s.h5"), "--sieves", "0"]) == 1
+    assert "small-particle sieve" in capsys.readouterr().err
     with pytest.raises(AnmPostError):
         RdfSpec(t_min=0.05, t_max=0.01)
 
