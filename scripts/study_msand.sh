@@ -10,6 +10,7 @@ anm=$(bash scripts/build.sh | tail -n 1)
 bash scripts/setup.sh > /dev/null
 out=out/studies/msand
 mkdir -p "$out" docs/figures
+# thesis: ten shells 0.025-0.474 mm (0.5-5 % of its 9.997 mm particle), R_s = 0.05 mm, slices normal to x
 dens=0.005,0.01,0.05,0.1,0.25,0.5,1
 for case in model:msand model-spheres:msand_spheres; do
    name=${case%%:*}
@@ -19,6 +20,7 @@ for case in model:msand model-spheres:msand_spheres; do
    fi
    anm-post table "out/msand/$name.h5" --format markdown > "$out/$nml-psd.md"
    /usr/bin/time -f "$nml convergence: %e s" anm-post convergence "out/msand/$name.h5" --densities "$dens" \
+      --unit mm --t-min 0.025 --t-max 0.474 \
       --csv "$out/$nml-conv.csv" --png "$out/$nml-conv.png" --rdf-png "$out/$nml-rdf.png" > "$out/$nml-conv.txt"
    cp "$out/$nml-conv.png" "$out/$nml-rdf.png" docs/figures/
 done
