@@ -108,7 +108,8 @@ def test_constructed_boolean_case_matches_geometry(tmp_path):
 
 def shaped_model(path, seed=5):
     """M_sand-like: one rough coarse particle (order 6) and 3000 small rough grains (order 3) placed
-    with their centres at least half a grain radius outside the coarse one (overlap among the grains allowed), periodic 4 mm box."""
+    with their centres at least half a grain radius outside the coarse one (overlap among the
+    grains allowed), periodic 4 mm box."""
     rng = np.random.default_rng(seed)
     big = random_shape(rng, 6, 1.0, 0.12)
     grain = random_shape(rng, 3, 1.0, 0.1)
@@ -191,7 +192,8 @@ def test_msand_wall_effect(shapes_dir, anm_bin, tmp_path):
     nml = nml.replace("length = 20.0, 20.0, 20.0", "length = 12.0, 12.0, 12.0")
     nml = nml.replace("nsieve = 3", "nsieve = 2").replace("min_width = 9.9, 4.9, 0.15", "min_width = 9.9, 0.15")
     nml = nml.replace("max_width = 10.0, 5.0, 0.25", "max_width = 10.0, 0.25")
-    nml = nml.replace("fraction = 0.20, 0.02, 0.08", "fraction = 0.15, 0.08").replace("order = 14, 14, 5", "order = 14, 5")
+    nml = nml.replace("fraction = 0.20, 0.02, 0.08", "fraction = 0.15, 0.08")
+    nml = nml.replace("order = 14, 14, 5", "order = 14, 5")
     nml = nml.replace("'../shared/shapes/MA111-7-coarse', '../shared/shapes/MA111-7-coarse',",
                       "'../shared/shapes/MA111-7-coarse',")
     nml = nml.replace("../shared/shapes", str(shapes_dir)).replace("directory = 'out/msand'",
