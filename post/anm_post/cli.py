@@ -261,6 +261,30 @@ def _cmd_convergence(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import collect, plot_sweep, sweep_markdown
+    runs = []
+    for item in args.runs:
+        value, sep, path = item.partition("=")
+        try:
+            runs.append((float(value), path))
+        except ValueError:
+            raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv") from None
+        if not sep:
+            raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv")
+    rows = collect(runs)
+    text = sweep_markdown(rows, args.label, args.scale)
+    sys.stdout.write(text)
+    if args.markdown:
+        try:
+            Path(args.markdown).write_text(text)
+        except OSError as exc:
+            raise AnmPostError(f"{args.markdown}: cannot write (--markdown): {exc.strerror}") from None
+    if args.png:
+        plot_sweep(rows, args.label, args.png, args.scale, shells=args.shells)
+    return 0
+
+
 def _rdf_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model file written by `anm run` (.h5)")
     p.add_argument("--particle", type=int, metavar="ID", help="0-based id of the RDF particle (default: the longest)")
@@ -284,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="anm-post",
         description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep}")
 
     p = sub.add_parser("table", help="PSD table of a model file, or a geometry table of `anm shape`",
                        description="With a model file (.h5): the PSD table (per sieve: width range, target and "
@@ -348,6 +372,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layers", metavar="K1,K2..", help="1-based layers of the s.d. panel (default: 4 spread layers)")
     p.add_argument("--rdf-png", metavar="FILE", help="also the bar plot of g(t) (Fig 3.8) at the highest density")
     p.set_defaults(func=_cmd_convergence)
+
+    p = sub.add_parser("sweep", help="table and plot of a parameter sweep of `anm run` (thesis Tables 2.1-2.3)",
+                       description="Collect model-summary.csv files of runs that differ in one parameter into a "
+                                   "Markdown table (PD and count per sieve, totals, shell fraction) and a plot "
+                                   "(thesis Figs 2.16, 2.17).")
+    p.add_argument("runs", nargs="+", metavar="VALUE=SUMMARY.csv", help="swept value and the run's summary file")
+    p.add_argument("--label", default="value", help="name of the swept parameter (axis and column title)")
+    p.add_argument("--scale", type=float, default=1.0, help="multiply the values by this for display (e.g. 100)")
+    p.add_argument("--markdown", metavar="FILE", help="write the table to FILE")
+    p.add_argument("--png", metavar="FILE", help="write the plot to FILE")
+    p.add_argument("--shells", action="store_true", help="add the shell volume fraction panel (Fig 2.17)")
+    p.set_defaults(func=_cmd_sweep)
     return parser
 
 

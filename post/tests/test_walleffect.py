@@ -205,3 +205,20 @@ def test_msand_wall_effect(shapes_dir, anm_bin, tmp_path):
     print(np.round(res.g, 3), np.round(res.g_se, 3))
     assert res.g[0] + 3 * res.g_se[0] < 1
     assert np.all(np.abs(res.g[-4:] - 1) < 3 * res.g_se[-4:])
+
+
+def test_sweep_table_from_run_summaries(tmp_path, capsys):
+    """`anm-post sweep` collects model-summary.csv files (format of `anm run`) into one table."""
+    head = "sieve,min_width_mm,max_width_mm,target_fraction,achieved_fraction,shortfall,count,shell_fraction\n"
+    for t, (a1, a2, n1, n2, sh) in {0.0: (0.1, 0.2, 5, 7, 0.0), 0.01: (0.1, 0.15, 5, 6, 0.02)}.items():
+        (tmp_path / f"{t}.csv").write_text(head + f"1,2,3,0.1,{a1},0,{n1},{sh / 2}\n2,1,2,0.2,{a2},0,{n2},{sh / 2}\n"
+                                           f"total,,,0.3,{a1 + a2},0,{n1 + n2},{sh}\n")
+    png = tmp_path / "s.png"
+    assert main(["sweep", f"0.01={tmp_path / '0.01.csv'}", f"0={tmp_path / '0.0.csv'}", "--scale", "100",
+                 "--shells", "--png", str(png)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2] == "| 0 | 0.1000 | 0.2000 | 0.3000 | 5 | 7 | 12 | 0.0000 |"
+    assert lines[3] == "| 1 | 0.1000 | 0.1500 | 0.2500 | 5 | 6 | 11 | 0.0200 |"
+    assert png.stat().st_size > 1000
+    assert main(["sweep", f"1={tmp_path / 'none.csv'}"]) == 1
+    assert "none.csv" in capsys.readouterr().err
