@@ -140,9 +140,9 @@ def test_slices_at_full_density_equal_volume_value(tmp_path):
     within one standard error (slices' and Monte Carlo's combined)."""
     shaped_model(tmp_path / "s.h5")
     model = read_model(tmp_path / "s.h5")
-    spec = RdfSpec(t_min=0.01, t_max=0.1, pixel=0.02, density=1.0, axis="y")
+    spec = RdfSpec(t_min=0.01, t_max=0.1, pixel=0.025, density=1.0, axis="y")
     res = rdf(model, spec)
-    vol = volume_fractions(model, spec, n_points=1_000_000, seed=4)
+    vol = volume_fractions(model, spec, n_points=600_000, seed=4)
     g3, se3 = vol.phi / res.phi_b, vol.phi_se / res.phi_b
     se = np.hypot(res.g_se, se3)
     print("slices", np.round(res.g, 3), "\n3D    ", np.round(g3, 3), "\nse", np.round(se, 3))
