@@ -7,6 +7,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 anm=$(bash scripts/build.sh | tail -n 1)
 bash scripts/setup.sh > /dev/null
+# this checkout's anm_post, whatever the editable install points at
+anm_post() { PYTHONPATH="$PWD/post${PYTHONPATH:+:$PYTHONPATH}" python3 -m anm_post "$@"; }
 out=out/studies/locations
 mkdir -p "$out" docs/figures
 runs=()
@@ -18,5 +20,5 @@ for n in 30 60 90 120 140 285 450 975 1500; do
    /usr/bin/time -f "locations $n: %e s" "$anm" run "$dir/run.nml" > "$dir/run.log" 2>&1
    runs+=("$n=$dir/model-summary.csv")
 done
-anm-post sweep "${runs[@]}" --label "random locations" --markdown "$out/table2_3.md" --png "$out/table2_3.png"
+anm_post sweep "${runs[@]}" --label "random locations" --markdown "$out/table2_3.md" --png "$out/table2_3.png"
 cp "$out/table2_3.png" docs/figures/

@@ -8,6 +8,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 anm=$(bash scripts/build.sh | tail -n 1)
 bash scripts/setup.sh > /dev/null
+# this checkout's anm_post, whatever the editable install points at
+anm_post() { PYTHONPATH="$PWD/post${PYTHONPATH:+:$PYTHONPATH}" python3 -m anm_post "$@"; }
 out=out/studies/msand
 mkdir -p "$out" docs/figures
 # thesis: ten shells 0.025-0.474 mm (0.5-5 % of its 9.997 mm particle), R_s = 0.05 mm, slices normal to x
@@ -18,8 +20,8 @@ for case in model:msand model-spheres:msand_spheres; do
    if [[ "${1:-}" == "--rerun" || ! -f out/msand/$name.h5 ]]; then
       /usr/bin/time -f "$nml: %e s" "$anm" run "inputs/$nml.nml"
    fi
-   anm-post table "out/msand/$name.h5" --format markdown > "$out/$nml-psd.md"
-   /usr/bin/time -f "$nml convergence: %e s" anm-post convergence "out/msand/$name.h5" --densities "$dens" \
+   anm_post table "out/msand/$name.h5" --format markdown > "$out/$nml-psd.md"
+   /usr/bin/time -f "$nml convergence: %e s" anm_post convergence "out/msand/$name.h5" --densities "$dens" \
       --unit mm --t-min 0.025 --t-max 0.474 \
       --csv "$out/$nml-conv.csv" --png "$out/$nml-conv.png" --rdf-png "$out/$nml-rdf.png" > "$out/$nml-conv.txt"
    cp "$out/$nml-conv.png" "$out/$nml-rdf.png" docs/figures/

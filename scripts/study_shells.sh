@@ -7,6 +7,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 anm=$(bash scripts/build.sh | tail -n 1)
 bash scripts/setup.sh > /dev/null
+# this checkout's anm_post, whatever the editable install points at
+anm_post() { PYTHONPATH="$PWD/post${PYTHONPATH:+:$PYTHONPATH}" python3 -m anm_post "$@"; }
 out=out/studies/shells
 mkdir -p "$out" docs/figures
 runs=()
@@ -23,6 +25,6 @@ for t in 0 0.002 0.004 0.006 0.008 0.010 0.012 0.014 0.016 0.018 0.020; do
    /usr/bin/time -f "shell $t: %e s" "$anm" run "$dir/run.nml" > "$dir/run.log" 2>&1
    runs+=("$t=$dir/model-summary.csv")
 done
-anm-post sweep "${runs[@]}" --label "shell thickness (% of L)" --scale 100 --shells \
+anm_post sweep "${runs[@]}" --label "shell thickness (% of L)" --scale 100 --shells \
    --markdown "$out/table2_1_2.md" --png "$out/fig2_16_17.png"
 cp "$out/fig2_16_17.png" docs/figures/
