@@ -18,6 +18,8 @@ EPILOG = """examples:
   anm-post slice out/default.h5 --center 10 10 10 --normal 1 1 0 --size 12 12 --pixel 0.04 --png out/oblique.png
   anm-post slice out/default.h5 --axis x --pixel 0.1 --density 0.1 --labels out/stack.h5   (stack, rho_s = 0.1)
   anm-post plot next.csv -o next.png                  plot of `anm study next|nbox ... --csv next.csv`
+  anm-post rdf out/msand/model.h5 --density 0.5 --csv g.csv --png g.png --points 1000000   wall effect g(t)
+  anm-post convergence out/msand/model.h5 --densities 0.01,0.1,0.5,1 --csv conv.csv --png conv.png
 """
 
 
@@ -183,13 +185,130 @@ def _triple(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
 
 
+def _rdf_spec(args: argparse.Namespace):
+    from .walleffect import RdfSpec
+    sieves = None
+    if args.sieves:
+        try:
+            sieves = tuple(int(x) for x in args.sieves.split(",") if x.strip())
+        except ValueError:
+            raise AnmPostError(f"--sieves: expected comma-separated 0-based sieve numbers, got {args.sieves!r}") \
+                from None
+    try:
+        return RdfSpec(particle=args.particle, n_shells=args.shells, t_min=args.t_min, t_max=args.t_max,
+                       unit=args.unit, axis=args.axis, pixel=args.pixel, density=getattr(args, "density", 1.0),
+                       small_sieves=sieves, small_below=args.below, phi_b=args.phi_b)
+    except AnmPostError as exc:
+        text = str(exc)
+        option = next((o for key, o in (("number of shells", "--shells"), ("shell distances", "--t-min/--t-max"),
+                                        ("pixel", "--pixel"), ("density", "--density"), ("bulk", "--phi-b"))
+                       if key in text), "options")
+        raise AnmPostError(f"{option}: {text}") from None
+
+
+def _check_particle(args: argparse.Namespace, model) -> None:
+    if args.particle is not None and not 0 <= args.particle < model.n_particles:
+        raise AnmPostError(f"--particle: {args.particle} is not a particle id of {model.path} "
+                           f"(0..{model.n_particles - 1})")
+
+
+def _cmd_rdf(args: argparse.Namespace) -> int:
+    from .model import read_model
+    from .walleffect import plot_rdf, rdf, volume_fractions
+    spec = _rdf_spec(args)
+    model = read_model(args.model)
+    _check_particle(args, model)
+    res = rdf(model, spec)
+    vol = volume_fractions(model, spec, n_points=args.points, seed=args.seed) if args.points else None
+    print(f"particle {res.particle}: length {res.length:.4g} mm, phi_B {res.phi_b:.4f} (small sieves "
+          f"{','.join(map(str, res.small_sieves))}), {len(res.positions)} slices, {res.seconds:.1f} s"
+          + (f"; 3D: {vol.n_points} points, {vol.seconds:.1f} s" if vol else ""), file=sys.stderr)
+    out = ["layer,t_inner_mm,t_outer_mm,g,g_sd,g_se" + (",g_3d,g_3d_se" if vol else "")]
+    for k in range(len(res.g)):
+        line = f"{k + 1},{res.t_inner[k]:.4f},{res.t_outer[k]:.4f},{res.g[k]:.4f},{res.g_sd[k]:.4f},{res.g_se[k]:.4f}"
+        if vol:
+            line += f",{vol.phi[k] / res.phi_b:.4f},{vol.phi_se[k] / res.phi_b:.4f}"
+        out.append(line)
+    print("\n".join(out))
+    if args.csv:
+        res.to_csv(args.csv, vol)
+    if args.png:
+        plot_rdf(res, args.png, vol)
+    return 0
+
+
+def _cmd_convergence(args: argparse.Namespace) -> int:
+    from .model import read_model
+    from .walleffect import convergence, plot_convergence
+    spec = _rdf_spec(args)
+    dens = _floats(args.densities, "--densities")
+    layers = [int(x) for x in _floats(args.layers, "--layers")] if args.layers else None
+    model = read_model(args.model)
+    _check_particle(args, model)
+    conv = convergence(model, spec, dens)
+    print(f"{sum(len(r.positions) for r in conv.results)} slices in {conv.results[0].seconds:.1f} s",
+          file=sys.stderr)
+    print("density,n_slices," + ",".join(f"g{k + 1},sd{k + 1}" for k in range(len(conv.results[0].g))))
+    for r in conv.results:
+        print(f"{r.density:g},{len(r.positions)}," + ",".join(f"{g:.4f},{s:.4f}" for g, s in zip(r.g, r.g_sd)))
+    if args.csv:
+        conv.to_csv(args.csv)
+    if args.png:
+        plot_convergence(conv, args.png, layers)
+    if args.rdf_png:
+        from .walleffect import plot_rdf
+        plot_rdf(conv.results[-1], args.rdf_png)
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import collect, plot_sweep, sweep_markdown
+    runs = []
+    for item in args.runs:
+        value, sep, path = item.partition("=")
+        try:
+            runs.append((float(value), path))
+        except ValueError:
+            raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv") from None
+        if not sep:
+            raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv")
+    rows = collect(runs)
+    text = sweep_markdown(rows, args.label, args.scale)
+    sys.stdout.write(text)
+    if args.markdown:
+        try:
+            Path(args.markdown).write_text(text)
+        except OSError as exc:
+            raise AnmPostError(f"{args.markdown}: cannot write (--markdown): {exc.strerror}") from None
+    if args.png:
+        plot_sweep(rows, args.label, args.png, args.scale, shells=args.shells)
+    return 0
+
+
+def _rdf_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", help="model file written by `anm run` (.h5)")
+    p.add_argument("--particle", type=int, metavar="ID", help="0-based id of the RDF particle (default: the longest)")
+    p.add_argument("--shells", type=int, default=10, metavar="K", help="number of shells K (default 10)")
+    p.add_argument("--t-min", type=float, default=0.005, metavar="T", help="innermost shell distance (default 0.005)")
+    p.add_argument("--t-max", type=float, default=0.05, metavar="T", help="outermost shell distance (default 0.05)")
+    p.add_argument("--unit", choices=["fraction", "mm"], default="fraction",
+                   help="unit of --t-min/--t-max: fraction of the RDF particle's length (default) or mm")
+    p.add_argument("--axis", choices=["x", "y", "z"], default="x", help="slice normal (default x, as the thesis)")
+    p.add_argument("--pixel", type=float, default=0.05, metavar="MM", help="pixel size R_s (default 0.05 mm)")
+    p.add_argument("--sieves", metavar="S[,S..]", help="0-based sieves of the small particles (default: the finest)")
+    p.add_argument("--below", type=float, metavar="MM", help="small particles: every sieve of max width <= MM")
+    p.add_argument("--phi-b", type=float, metavar="PHI", help="bulk fraction phi_B (default: Eq 3.6 from the model)")
+    p.add_argument("--csv", metavar="FILE", help="write the table to FILE")
+    p.add_argument("--png", metavar="FILE", help="write the plot to FILE")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of anm-post."""
     parser = argparse.ArgumentParser(
         prog="anm-post",
         description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep}")
 
     p = sub.add_parser("table", help="PSD table of a model file, or a geometry table of `anm shape`",
                        description="With a model file (.h5): the PSD table (per sieve: width range, target and "
@@ -230,6 +349,41 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("csv", help="CSV with header next,v_box,v_box_certified or nbox,d_overlap")
     p.add_argument("-o", "--output", metavar="PNG", help="output picture (default: the CSV name with .png)")
     p.set_defaults(func=_cmd_plot)
+
+    p = sub.add_parser("rdf", help="wall effect g(t) around one particle (thesis 3.4, Fig 3.8)",
+                       description="g(t) = small-particle fraction in each shell layer around the RDF particle "
+                                   "divided by the bulk fraction phi_B (thesis Eqs 3.6, 3.10, 3.11), from parallel "
+                                   "slices across the particle; with --points also the same fraction measured in "
+                                   "the volume by Monte Carlo points (no slices). Prints a CSV table.",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _rdf_options(p)
+    p.add_argument("--density", type=float, default=1.0, metavar="RHO", help="slice density rho_s (default 1)")
+    p.add_argument("--points", type=int, default=0, metavar="N", help="also the 3D value from N Monte Carlo points")
+    p.add_argument("--seed", type=int, default=1, help="seed of the Monte Carlo points (default 1)")
+    p.set_defaults(func=_cmd_rdf)
+
+    p = sub.add_parser("convergence", help="g(t) and its spread against the slice density (thesis Figs 3.9, 3.10)",
+                       description="g(t) at several slice densities rho_s and the standard deviation of the "
+                                   "per-slice values against rho_s for chosen layers (thesis Figs 3.9-3.13).",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _rdf_options(p)
+    p.add_argument("--densities", default="0.01,0.05,0.1,0.25,0.5,1", metavar="R1,R2..",
+                   help="slice densities (default 0.01,0.05,0.1,0.25,0.5,1)")
+    p.add_argument("--layers", metavar="K1,K2..", help="1-based layers of the s.d. panel (default: 4 spread layers)")
+    p.add_argument("--rdf-png", metavar="FILE", help="also the bar plot of g(t) (Fig 3.8) at the highest density")
+    p.set_defaults(func=_cmd_convergence)
+
+    p = sub.add_parser("sweep", help="table and plot of a parameter sweep of `anm run` (thesis Tables 2.1-2.3)",
+                       description="Collect model-summary.csv files of runs that differ in one parameter into a "
+                                   "Markdown table (PD and count per sieve, totals, shell fraction) and a plot "
+                                   "(thesis Figs 2.16, 2.17).")
+    p.add_argument("runs", nargs="+", metavar="VALUE=SUMMARY.csv", help="swept value and the run's summary file")
+    p.add_argument("--label", default="value", help="name of the swept parameter (axis and column title)")
+    p.add_argument("--scale", type=float, default=1.0, help="multiply the values by this for display (e.g. 100)")
+    p.add_argument("--markdown", metavar="FILE", help="write the table to FILE")
+    p.add_argument("--png", metavar="FILE", help="write the plot to FILE")
+    p.add_argument("--shells", action="store_true", help="add the shell volume fraction panel (Fig 2.17)")
+    p.set_defaults(func=_cmd_sweep)
     return parser
 
 
