@@ -118,18 +118,24 @@ contains
       i = i + 1
    end subroutine option_text
 
-   !> Integer value of option `name` at argument position i+1.
-   subroutine int_option(i, name, val, error)
+   !> Integer value of option `name` at argument position i+1, at least `minimum` when given.
+   subroutine int_option(i, name, val, error, minimum)
       integer, intent(inout) :: i
       character(len=*), intent(in) :: name
       integer, intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
+      integer, intent(in), optional :: minimum
       character(len=:), allocatable :: text
       integer :: stat
       call option_text(i, name, "+-0123456789", "an integer", text, error)
       if (allocated(error)) return
       read (text, *, iostat=stat) val
-      if (stat /= 0) call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
+      if (stat /= 0) then
+         call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
+      else if (present(minimum)) then
+         if (val < minimum) call fatal_error(error, "option "//name//": "//to_string(val)//" must be >= " &
+                                             //to_string(minimum), error_code%value)
+      end if
    end subroutine int_option
 
    !> Real value of option `name` at argument position i+1.
@@ -160,19 +166,11 @@ contains
          arg = argument(i)
          select case (arg)
          case ("--order")
-            call int_option(i, "--order", order, error)
+            call int_option(i, "--order", order, error, minimum=0)
             if (allocated(error)) return
-            if (order < 0) then
-               call fatal_error(error, "option --order: "//to_string(order)//" must be >= 0", error_code%value)
-               return
-            end if
          case ("--next")
-            call int_option(i, "--next", next, error)
+            call int_option(i, "--next", next, error, minimum=2)
             if (allocated(error)) return
-            if (next < 2) then
-               call fatal_error(error, "option --next: "//to_string(next)//" must be >= 2", error_code%value)
-               return
-            end if
          case default
             if (arg(1:min(1, len(arg))) == "-") then
                call fatal_error(error, "anm shape: unknown option '"//arg//"'", error_code%value)
@@ -288,12 +286,8 @@ contains
          arg = argument(i)
          select case (arg)
          case ("--resolution")
-            call int_option(i, "--resolution", resolution, error)
+            call int_option(i, "--resolution", resolution, error, minimum=4)
             if (allocated(error)) return
-            if (resolution < 4) then
-               call fatal_error(error, "option --resolution: "//to_string(resolution)//" must be >= 4", error_code%value)
-               return
-            end if
          case ("--tolerance")
             call real_option(i, "--tolerance", tol, error)
             if (allocated(error)) return

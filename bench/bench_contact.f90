@@ -9,6 +9,7 @@
 program bench_contact
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
    use anm_core_kinds, only: wp, i8
+   use anm_core_statistics, only: median
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
    use anm_sh_expansion, only: sh_expansion_type
@@ -136,21 +137,4 @@ contains
       end do
    end subroutine time_method
 
-   function median(x) result(med)
-      real(wp), intent(in) :: x(:)
-      real(wp) :: med, y(size(x)), tmp
-      integer :: i, j
-      y = x
-      do i = 2, size(y)
-         tmp = y(i)
-         j = i - 1
-         do while (j >= 1)
-            if (y(j) <= tmp) exit
-            y(j + 1) = y(j)
-            j = j - 1
-         end do
-         y(j + 1) = tmp
-      end do
-      med = 0.5_wp * (y((size(y) + 1) / 2) + y(size(y) / 2 + 1))
-   end function median
 end program bench_contact

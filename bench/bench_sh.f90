@@ -6,6 +6,7 @@
 program bench_sh
    use, intrinsic :: iso_fortran_env, only: output_unit
    use anm_core_kinds, only: wp, i8
+   use anm_core_statistics, only: median
    use anm_core_random, only: rng_type, new_rng
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
    use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
@@ -93,21 +94,4 @@ contains
          sink, ")"
    end subroutine bench_points
 
-   real(wp) function median(x)
-      real(wp), intent(in) :: x(:)
-      real(wp) :: y(size(x)), t
-      integer :: i, j
-      y = x
-      do i = 2, size(y)
-         t = y(i)
-         j = i - 1
-         do while (j >= 1)
-            if (y(j) <= t) exit
-            y(j + 1) = y(j)
-            j = j - 1
-         end do
-         y(j + 1) = t
-      end do
-      median = y((size(y) + 1) / 2)
-   end function median
 end program bench_sh

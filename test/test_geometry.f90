@@ -4,6 +4,7 @@
 !> control the test must reject), and body/world transforms.
 module test_geometry
    use anm_core_kinds, only: wp, pi, two_pi, i8
+   use anm_core_statistics, only: median
    use anm_core_error, only: error_type, fatal_error
    use anm_core_random, only: rng_type, new_rng
    use anm_core_strings, only: to_string
@@ -109,29 +110,6 @@ contains
       if (allocated(error)) return
       call check(error, medt <= 3.0e-2_wp .and. worst(6) <= 0.12_wp, "thickness: median <= 3 %, max <= 12 %")
    end subroutine test_nist_table
-
-   function median(x) result(med)
-      real(wp), intent(in) :: x(:)
-      real(wp) :: med, y(size(x)), t
-      integer :: i, j, n
-      y = x
-      n = size(y)
-      do i = 2, n
-         t = y(i)
-         j = i - 1
-         do while (j >= 1)
-            if (y(j) <= t) exit
-            y(j + 1) = y(j)
-            j = j - 1
-         end do
-         y(j + 1) = t
-      end do
-      if (mod(n, 2) == 1) then
-         med = y((n + 1) / 2)
-      else
-         med = 0.5_wp * (y(n / 2) + y(n / 2 + 1))
-      end if
-   end function median
 
    !> Read a NIST geometry table: names and the 18 numeric columns (column 1 = xlow, ... 12 = Nnn,
    !> 14 = length, 15 = width, 16 = thick).

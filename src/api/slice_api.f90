@@ -17,7 +17,7 @@ module anm_api_slice
    use, intrinsic :: iso_c_binding, only: c_double, c_int
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type
-   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion, new_sh_expansion_real, sh_truncate
+   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real, sh_truncate, sh_from_rows
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_slicing_plane, only: slice_plane_type, new_slice_plane
    use anm_slicing_form, only: slice_form_type, new_slice_form, new_slice_form_bounds
@@ -342,9 +342,7 @@ contains
       type(sh_expansion_type), intent(out) :: sh
       integer(c_int), intent(out) :: status
       character(len=512), intent(out) :: message
-      complex(wp), allocatable :: c(:, :)
-      type(sh_expansion_type) :: full
-      integer :: n, m, nm
+      integer :: nm
 
       status = 0
       message = ""
@@ -357,15 +355,7 @@ contains
          call set_error(status, message, 4, "shape nmax or order out of range (nmax must satisfy (nmax+1)^2 <= ncoef)")
          return
       end if
-      allocate (c(0:nm, -nm:nm))
-      c = (0.0_wp, 0.0_wp)
-      do n = 0, nm
-         do m = -n, n
-            c(n, m) = cmplx(coeffs(1, n * n + n - m + 1, ishape), coeffs(2, n * n + n - m + 1, ishape), wp)
-         end do
-      end do
-      call new_sh_expansion(full, c, nm)
-      sh = sh_truncate(full, order)
+      sh = sh_truncate(sh_from_rows(coeffs(:, :, ishape), nm), order)
    end subroutine get_shape
 
    !> Copy a form into the boundary arrays.

@@ -377,6 +377,35 @@ contains
       if (st /= 0) call fail(error, file, path, "missing dataset")
    end subroutine open_dataset
 
+   !> Open a dataset for reading after checking that it exists and has the expected rank.
+   subroutine open_rank(file, path, rank, dims, dset, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer, intent(in) :: rank
+      integer, allocatable, intent(out) :: dims(:)
+      integer(hid_t), intent(out) :: dset
+      type(error_type), allocatable, intent(out) :: error
+      call h5_dims(file, path, dims, error)
+      if (allocated(error)) return
+      if (size(dims) /= rank) then
+         call fail(error, file, path, "expected a rank-"//achar(48 + rank)//" dataset")
+         return
+      end if
+      call open_dataset(file, path, dset, error)
+   end subroutine open_rank
+
+   !> Close a dataset after a read whose status is st.
+   subroutine close_read(file, path, dset, st, error)
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer(hid_t), intent(in) :: dset
+      integer, intent(in) :: st
+      type(error_type), allocatable, intent(out) :: error
+      integer :: s2
+      call h5dclose_f(dset, s2)
+      if (st /= 0) call fail(error, file, path, "read failed")
+   end subroutine close_read
+
    subroutine read_real1(file, path, x, error)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
@@ -385,18 +414,11 @@ contains
       integer, allocatable :: dims(:)
       integer(hid_t) :: dset
       integer :: st
-      call h5_dims(file, path, dims, error)
+      call open_rank(file, path, 1, dims, dset, error)
       if (allocated(error)) return
-      if (size(dims) /= 1) then
-         call fail(error, file, path, "expected a rank-1 dataset")
-         return
-      end if
       allocate (x(dims(1)))
-      call open_dataset(file, path, dset, error)
-      if (allocated(error)) return
       call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) call fail(error, file, path, "read failed")
+      call close_read(file, path, dset, st, error)
    end subroutine read_real1
 
    subroutine read_real2(file, path, x, error)
@@ -407,18 +429,11 @@ contains
       integer, allocatable :: dims(:)
       integer(hid_t) :: dset
       integer :: st
-      call h5_dims(file, path, dims, error)
+      call open_rank(file, path, 2, dims, dset, error)
       if (allocated(error)) return
-      if (size(dims) /= 2) then
-         call fail(error, file, path, "expected a rank-2 dataset")
-         return
-      end if
       allocate (x(dims(1), dims(2)))
-      call open_dataset(file, path, dset, error)
-      if (allocated(error)) return
       call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) call fail(error, file, path, "read failed")
+      call close_read(file, path, dset, st, error)
    end subroutine read_real2
 
    subroutine read_real3(file, path, x, error)
@@ -429,18 +444,11 @@ contains
       integer, allocatable :: dims(:)
       integer(hid_t) :: dset
       integer :: st
-      call h5_dims(file, path, dims, error)
+      call open_rank(file, path, 3, dims, dset, error)
       if (allocated(error)) return
-      if (size(dims) /= 3) then
-         call fail(error, file, path, "expected a rank-3 dataset")
-         return
-      end if
       allocate (x(dims(1), dims(2), dims(3)))
-      call open_dataset(file, path, dset, error)
-      if (allocated(error)) return
       call h5dread_f(dset, H5T_NATIVE_DOUBLE, x, int(dims, hsize_t), st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) call fail(error, file, path, "read failed")
+      call close_read(file, path, dset, st, error)
    end subroutine read_real3
 
    subroutine read_int1(file, path, x, error)
@@ -451,18 +459,11 @@ contains
       integer, allocatable :: dims(:)
       integer(hid_t) :: dset
       integer :: st
-      call h5_dims(file, path, dims, error)
+      call open_rank(file, path, 1, dims, dset, error)
       if (allocated(error)) return
-      if (size(dims) /= 1) then
-         call fail(error, file, path, "expected a rank-1 dataset")
-         return
-      end if
       allocate (x(dims(1)))
-      call open_dataset(file, path, dset, error)
-      if (allocated(error)) return
       call h5dread_f(dset, H5T_NATIVE_INTEGER, x, int(dims, hsize_t), st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) call fail(error, file, path, "read failed")
+      call close_read(file, path, dset, st, error)
    end subroutine read_int1
 
    subroutine read_string(file, path, text, error)

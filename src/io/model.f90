@@ -12,7 +12,7 @@ module anm_io_model
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
-   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion, sh_to_complex
+   use anm_sh_expansion, only: sh_expansion_type, sh_from_rows, sh_to_rows
    use anm_io_hdf5, only: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, &
       & h5_read, h5_read_attr, h5_exists, h5_read_fixed_strings
    implicit none
@@ -115,17 +115,7 @@ contains
       coeffs = 0.0_wp
       do s = 1, ns
          nmax(s) = model%shapes(s)%nmax
-         allocate (c(0:nmax(s), -nmax(s):nmax(s)))
-         c(:, :) = sh_to_complex(model%shapes(s))
-         k = 0
-         do n = 0, nmax(s)
-            do m = n, -n, -1
-               k = k + 1
-               coeffs(1, k, s) = real(c(n, m), wp)
-               coeffs(2, k, s) = aimag(c(n, m))
-            end do
-         end do
-         deallocate (c)
+         coeffs(:, :(nmax(s) + 1)**2, s) = sh_to_rows(model%shapes(s))
       end do
       call h5_group(f, "/shapes", error)
       if (allocated(error)) goto 99
@@ -219,8 +209,7 @@ contains
       character(len=:), allocatable :: fmt
       real(wp), allocatable :: coeffs(:, :, :), rot(:, :, :), tmp1(:)
       integer, allocatable :: nmax(:), ivec(:)
-      complex(wp), allocatable :: c(:, :)
-      integer :: ver, per, s, n, m, k, p, ns
+      integer :: ver, per, s, p, ns
 
       call h5_open_read(f, path, error)
       if (allocated(error)) return
@@ -253,16 +242,12 @@ contains
       ns = size(nmax)
       allocate (model%shapes(ns))
       do s = 1, ns
-         allocate (c(0:nmax(s), -nmax(s):nmax(s)))
-         k = 0
-         do n = 0, nmax(s)
-            do m = n, -n, -1
-               k = k + 1
-               c(n, m) = cmplx(coeffs(1, k, s), coeffs(2, k, s), wp)
-            end do
-         end do
-         call new_sh_expansion(model%shapes(s), c, nmax(s))
-         deallocate (c)
+         if (nmax(s) < 0 .or. (nmax(s) + 1)**2 > size(coeffs, 2)) then
+            call fatal_error(error, path//"::/shapes/nmax: degree "//to_string(nmax(s))//" of shape " &
+                             //to_string(s - 1)//" does not fit /shapes/coeffs", error_code%format)
+            goto 99
+         end if
+         model%shapes(s) = sh_from_rows(coeffs(:, :, s), nmax(s))
       end do
       call h5_read_fixed_strings(f, "/shapes/name", model%shape_names, error)
       if (allocated(error)) goto 99

@@ -23,7 +23,7 @@ module anm_sh_expansion
    private
 
    public :: sh_expansion_type, new_sh_expansion, new_sh_expansion_real, sh_truncate, &
-      & sh_to_complex, surface_normal
+      & sh_to_complex, sh_from_rows, sh_to_rows, surface_normal
 
    !> A real SH expansion of degree nmax (immutable after construction; safe to share between
    !> threads).
@@ -129,6 +129,42 @@ contains
          end do
       end do
    end function sh_to_complex
+
+   !> Expansion of degree nmax from coefficient rows in the NIST line order (n = 0.., m = n..-n):
+   !> rows(1, k) = Re a_nm, rows(2, k) = Im a_nm, k = n^2 + n - m + 1 (the model file's layout).
+   pure function sh_from_rows(rows, nmax) result(shape)
+      !> Coefficient rows, (2, >= (nmax+1)^2).
+      real(wp), intent(in) :: rows(:, :)
+      !> Highest degree.
+      integer, intent(in) :: nmax
+      type(sh_expansion_type) :: shape
+      complex(wp) :: c(0:nmax, -nmax:nmax)
+      integer :: n, m
+      c = (0.0_wp, 0.0_wp)
+      do n = 0, nmax
+         do m = -n, n
+            c(n, m) = cmplx(rows(1, n * n + n - m + 1), rows(2, n * n + n - m + 1), wp)
+         end do
+      end do
+      call new_sh_expansion(shape, c, nmax)
+   end function sh_from_rows
+
+   !> Coefficient rows in the NIST line order (the inverse of sh_from_rows), (2, (nmax+1)^2).
+   pure function sh_to_rows(shape) result(rows)
+      !> Expansion.
+      type(sh_expansion_type), intent(in) :: shape
+      real(wp), allocatable :: rows(:, :)
+      complex(wp), allocatable :: c(:, :)
+      integer :: n, m, k
+      allocate (c(0:shape%nmax, -shape%nmax:shape%nmax), rows(2, (shape%nmax + 1)**2))
+      c(:, :) = sh_to_complex(shape)
+      do n = 0, shape%nmax
+         do m = n, -n, -1
+            k = n * n + n - m + 1
+            rows(:, k) = [real(c(n, m), wp), aimag(c(n, m))]
+         end do
+      end do
+   end function sh_to_rows
 
    !> Mean radius over the sphere, a_00 / (2 sqrt(pi)).
    pure function mean_radius(self) result(rbar)

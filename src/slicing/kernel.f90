@@ -27,6 +27,7 @@
 !>        & particle, layer, owner, stats, error)
 module anm_slicing_kernel
    use anm_core_kinds, only: wp, i8
+   use anm_core_statistics, only: median
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_parking_cell_list, only: cell_list_type, new_cell_list
@@ -434,44 +435,4 @@ contains
       code = 1 + k(1) + (2 * max_image + 1) * (k(2) + (2 * max_image + 1) * k(3))
    end function image_code
 
-   !> Median of a non-empty array (by a copy and a partial selection).
-   pure function median(x) result(m)
-      real(wp), intent(in) :: x(:)
-      real(wp) :: m
-      real(wp), allocatable :: w(:)
-      real(wp) :: pivot, t
-      integer :: lo, hi, i, j, kth
-      w = x
-      kth = (size(w) + 1) / 2
-      lo = 1
-      hi = size(w)
-      do while (lo < hi)
-         pivot = w((lo + hi) / 2)
-         i = lo
-         j = hi
-         do while (i <= j)
-            do while (w(i) < pivot)
-               i = i + 1
-            end do
-            do while (w(j) > pivot)
-               j = j - 1
-            end do
-            if (i <= j) then
-               t = w(i)
-               w(i) = w(j)
-               w(j) = t
-               i = i + 1
-               j = j - 1
-            end if
-         end do
-         if (kth <= j) then
-            hi = j
-         else if (kth >= i) then
-            lo = i
-         else
-            exit
-         end if
-      end do
-      m = w(kth)
-   end function median
 end module anm_slicing_kernel
