@@ -64,8 +64,13 @@ module anm_parking_engine
       type(sh_expansion_type), allocatable :: layers(:)
       !> Volume inside each layer's outer surface (shape units).
       real(wp), allocatable :: layer_volume(:)
-      !> Bounding radius of the largest body used (shape units).
+      !> Bounding radius of the largest body the overlap tests use (shape units).
       real(wp) :: r_out = 0.0_wp
+      !> Radii (shape units) such that a particle of this kind, placed as a candidate, certainly
+      !> overlaps a parked one whose centre is closer than scale r_in_query + scale_j r_in_parked
+      !> (the inscribed radii of the bodies the shell mode tests: the overlap test's own first
+      !> stage).
+      real(wp) :: r_in_query = 0.0_wp, r_in_parked = 0.0_wp
    end type particle_kind_type
 
    !> The attempt sequence of one particle: the thesis' four nested randomness sources, drawn from
@@ -306,6 +311,7 @@ contains
          real(wp), allocatable, intent(inout) :: shf(:, :)
          integer :: i, j, ncand
          real(wp) :: xj(3)
+         logical :: hit
          ok = .false.
          if (.not. cfg%periodic .and. jmin == 0) then
             if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
@@ -314,10 +320,10 @@ contains
                if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box)) return
             end if
          end if
-         call cl%query(x, s_ * kinds(kn)%r_out, center, rho, cnd, shf, ncand)
+         call cl%neighbours(x, s_ * kinds(kn)%r_out, cnd, shf, ncand, hit, rin=s_ * kinds(kn)%r_in_query, jmin=jmin)
+         if (hit) return
          do i = 1, ncand
             j = cnd(i)
-            if (j <= jmin) cycle
             xj = center(:, j) + shf(:, i)
             associate (kj => kinds(kind_of(j)))
                if (cfg%nlayer == 0 .or. cfg%mode == shell_mode%overlap) then
@@ -423,7 +429,7 @@ contains
          rho(np) = s_ * kinds(kn)%r_out
          sieve_of(np) = s
          kind_of(np) = kn
-         call cl%insert(np, x, rho(np))
+         call cl%insert(np, x, rho(np), rin=s_ * kinds(kn)%r_in_parked)
       end subroutine add_particle
 
       subroutine grow()
@@ -565,6 +571,8 @@ contains
       call new_contact_body(kd%body, s, error, next=cfg%n_ext)
       if (allocated(error)) return
       kd%r_out = kd%body%r_max
+      kd%r_in_query = kd%body%r_min
+      kd%r_in_parked = kd%body%r_min
       if (cfg%nlayer == 0) return
       if (cfg%thickness_unit == "mm") then
          w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
@@ -583,9 +591,13 @@ contains
       do k = 1, size(t)
          kd%layer_volume(k) = reports(k)%outer_volume
       end do
+      ! overlapping shells do not take part in the parking: no contact body for them
+      if (cfg%mode == shell_mode%overlap) return
       allocate (kd%shell_body)
       call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=cfg%n_ext)
       if (allocated(error)) return
       kd%r_out = max(kd%r_out, kd%shell_body%r_max)
+      kd%r_in_query = kd%shell_body%r_min
+      if (cfg%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
    end subroutine prepare_one
 end module anm_parking_engine
