@@ -309,9 +309,10 @@ contains
          real(wp), intent(in) :: x(3), rr(3, 3), s_
          integer, allocatable, intent(inout) :: cnd(:)
          real(wp), allocatable, intent(inout) :: shf(:, :)
-         integer :: i, j, ncand
+         integer :: i, j, ncand, ii
          real(wp) :: xj(3)
          logical :: hit
+         integer, allocatable :: order(:)
          ok = .false.
          if (.not. cfg%periodic .and. jmin == 0) then
             if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
@@ -322,7 +323,9 @@ contains
          end if
          call cl%neighbours(x, s_ * kinds(kn)%r_out, cnd, shf, ncand, hit, rin=s_ * kinds(kn)%r_in_query, jmin=jmin)
          if (hit) return
-         do i = 1, ncand
+         call likely_first(kn, x, s_, cnd, shf, ncand, order)
+         do ii = 1, ncand
+            i = order(ii)
             j = cnd(i)
             xj = center(:, j) + shf(:, i)
             associate (kj => kinds(kind_of(j)))
@@ -339,6 +342,43 @@ contains
          end do
          ok = .true.
       end function fits
+
+      !> The order in which to test the candidates: the most likely overlaps first, so that an
+      !> attempt that fails usually fails at its first exact test. The key is where the centre
+      !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1).
+      !> Short lists are sorted (insertion sort, stable); long ones are kept in their order.
+      subroutine likely_first(kn, x, s_, cnd, shf, ncand, order)
+         integer, intent(in) :: kn, ncand
+         real(wp), intent(in) :: x(3), s_
+         integer, intent(in) :: cnd(:)
+         real(wp), intent(in) :: shf(:, :)
+         integer, allocatable, intent(out) :: order(:)
+         integer, parameter :: max_sorted = 64
+         real(wp) :: key(max_sorted), kk, r_in, r_out
+         integer :: i, m, j, oi
+         allocate (order(ncand))
+         do i = 1, ncand
+            order(i) = i
+         end do
+         if (ncand < 2 .or. ncand > max_sorted) return
+         do i = 1, ncand
+            j = cnd(i)
+            r_in = s_ * kinds(kn)%r_in_query + scale(j) * kinds(kind_of(j))%r_in_parked
+            r_out = s_ * kinds(kn)%r_out + rho(j)
+            key(i) = (norm2(center(:, j) + shf(:, i) - x) - r_in) / max(r_out - r_in, tiny(1.0_wp))
+         end do
+         do i = 2, ncand
+            oi = order(i)
+            kk = key(oi)
+            m = i - 1
+            do while (m >= 1)
+               if (key(order(m)) <= kk) exit
+               order(m + 1) = order(m)
+               m = m - 1
+            end do
+            order(m + 1) = oi
+         end do
+      end subroutine likely_first
 
       !> Advance an attempt sequence by one attempt (or mark it done).
       subroutine next_attempt(a, sv)
@@ -463,7 +503,8 @@ contains
       type(shape_set_type), allocatable :: sets(:)
       integer, allocatable :: set_of(:), set_first(:)
       character(len=512), allocatable :: src(:)
-      integer :: s, nset, k, i, ns, nlev, lev, total, n
+      integer :: s, nset, k, i, ns, nlev, lev, total, n, j, sieve, level
+      integer, allocatable :: same(:)
       type(error_type), allocatable :: errs(:)
       logical, allocatable :: failed(:)
 
@@ -530,9 +571,25 @@ contains
             end do
          end do
       end do
-      failed = .false.
-      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n) private(i) schedule(dynamic)
+      ! a kind equal to an earlier one (same shape and order, and with shells in mm the same width:
+      ! e.g. two sieves of one source) is computed once and copied
+      allocate (same(n))
       do i = 1, n
+         same(i) = i
+         do j = 1, i - 1
+            if (same(j) /= j) cycle
+            if (kinds(j)%shape /= kinds(i)%shape .or. kinds(j)%order /= kinds(i)%order) cycle
+            if (nlev > 1) then
+               if (level_width(cfg, kinds(j)) /= level_width(cfg, kinds(i))) cycle
+            end if
+            same(i) = j
+            exit
+         end do
+      end do
+      failed = .false.
+      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n, same) private(i) schedule(dynamic)
+      do i = 1, n
+         if (same(i) /= i) cycle
          block
             type(error_type), allocatable :: err
             call prepare_one(cfg, model%shapes(kinds(i)%shape), trim(model%shape_names(kinds(i)%shape)), kinds(i), err)
@@ -549,7 +606,23 @@ contains
             return
          end if
       end do
+      do i = 1, n
+         if (same(i) == i) cycle
+         sieve = kinds(i)%sieve
+         level = kinds(i)%level
+         kinds(i) = kinds(same(i))
+         kinds(i)%sieve = sieve
+         kinds(i)%level = level
+      end do
    end subroutine prepare_kinds
+
+   !> Width of a kind's width level (shells in mm).
+   pure real(wp) function level_width(cfg, kd) result(w)
+      type(run_config_type), intent(in) :: cfg
+      type(particle_kind_type), intent(in) :: kd
+      w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
+          / width_levels
+   end function level_width
 
    subroutine prepare_one(cfg, shape, name, kd, error)
       type(run_config_type), intent(in) :: cfg
@@ -575,8 +648,7 @@ contains
       kd%r_in_parked = kd%body%r_min
       if (cfg%nlayer == 0) return
       if (cfg%thickness_unit == "mm") then
-         w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
-             / width_levels
+         w = level_width(cfg, kd)
          sc = w / kd%width
          t = cfg%thickness / sc
       else
