@@ -31,6 +31,8 @@ contains
               new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
               new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
               new_unittest("verify: a particle through a wall fails", test_verify_wall), &
+              new_unittest("verify: pruned sampling gives the report of every sample (sizes 8:1)", &
+                           test_verify_pruning), &
               new_unittest("RSA of spheres approaches saturation (>= 0.36)", test_rsa_spheres), &
               new_unittest("synthetic mortar reaches every target within 1 % and verifies", test_small_job), &
               new_unittest("walls: particles stay inside and verify passes", test_walls_job), &
@@ -170,6 +172,39 @@ contains
                                      [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
       call check(error, rep%wall_violations, 1, "wall crossing not found")
    end subroutine test_verify_wall
+   !> A parked model of synthetic shapes of two sizes (8:1), then the same with every particle
+   !> grown by 0.2 % and by 3 % (shallow and deeper overlaps): the block bounds must not change
+   !> the pairs, the count of overlaps, the worst pair or the deepest penetration.
+   subroutine test_verify_pruning(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: fast, full
+      real(wp), allocatable :: scale0(:)
+      integer :: k
+      real(wp), parameter :: grow(3) = [1.0_wp, 1.002_wp, 1.03_wp]
+      call run_nml("prune.nml", "&box length = 6, 6, 6 /"//new_line("a")// &
+                   "&sieves nsieve = 2, min_width = 2.0, 0.25, max_width = 2.4, 0.3, fraction = 0.15, 0.08, " &
+                   //"order = 10, 5 /"//new_line("a")//"&synthetic count = 4 /"//new_line("a")//"&run seed = 5 /", m, error)
+      if (allocated(error)) return
+      scale0 = m%scale
+      do k = 1, 3
+         m%scale = scale0 * grow(k)
+         call verify_model(m, 48, fast)
+         call verify_model(m, 48, full, prune=.false.)
+         print '(a,f6.3,a,i0,a,i0,a,es10.3)', "        scale x", grow(k), ": ", full%pairs_checked, " pairs, ", &
+            full%overlapping_pairs, " overlapping, deepest ", full%max_depth
+         call check(error, fast%pairs_checked == full%pairs_checked .and. &
+                    fast%overlapping_pairs == full%overlapping_pairs .and. all(fast%worst == full%worst), &
+                    "pruned report differs")
+         if (allocated(error)) return
+         call check(error, fast%max_depth, full%max_depth, "deepest penetration", thr=0.0_wp)
+         if (allocated(error)) return
+         call check(error, full%pairs_checked > 0_i8 .and. (k == 1 .or. full%overlapping_pairs > 0_i8), &
+                    "no pairs or overlaps to compare")
+         if (allocated(error)) return
+      end do
+   end subroutine test_verify_pruning
+
    subroutine run_nml(name, text, model, error)
       character(len=*), intent(in) :: name, text
       type(model_type), intent(out) :: model
