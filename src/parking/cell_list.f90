@@ -6,7 +6,7 @@
 !> for a sphere (c, rho_q) visits, in each level, only the cells within rho_q + rho_max(level) of
 !> c: a few cells per level. A single uniform grid sized for the largest particles would put
 !> thousands of sand grains in each cell; one sized for the sand would make every aggregate span
-!> thousands of cells. Cost per query: O(levels + neighbours); memory: about one 120-byte block per
+!> thousands of cells. Cost per query: O(levels + neighbours); memory: about one 128-byte block per
 !> occupied cell plus one integer per cell of the levels in use (at most 2^24 cells per level;
 !> beyond that cells grow, which stays correct).
 !>
@@ -42,13 +42,22 @@ module anm_parking_cell_list
    !> Records per block.
    integer, parameter :: block_size = 3
 
-   !> Up to block_size records of one cell (120 bytes), and the next block of the cell.
+   !> What a query reads of a stored particle (40 bytes).
+   type :: cell_record_type
+      !> Centre.
+      real(wp) :: x(3) = 0.0_wp
+      !> Bounding radius (rounded up) and certain-overlap radius (rounded down).
+      real(sp) :: rho = 0.0_sp, rin = 0.0_sp
+      !> Particle id.
+      integer :: id = 0
+   end type cell_record_type
+
+   !> Up to block_size records of one cell and the next block of the cell (128 bytes: the count
+   !> and the first record share the first 48 bytes).
    type :: cell_block_type
-      real(wp) :: x(3, block_size)
-      real(sp) :: rho(block_size), rin(block_size)
-      integer :: id(block_size)
       integer :: n = 0
       integer :: next = 0
+      type(cell_record_type) :: r(block_size)
    end type cell_block_type
 
    type :: cell_level_type
@@ -184,12 +193,12 @@ contains
          associate (bk => self%blocks(b))
             bk%n = bk%n + 1
             m = bk%n
-            bk%x(:, m) = center
-            bk%rho(m) = round_up(rho)
-            bk%rin(m) = 0.0_sp
-            if (present(rin)) bk%rin(m) = round_down(rin)
-            bk%id(m) = i
-            lv%rho_max = max(lv%rho_max, real(bk%rho(m), wp))
+            bk%r(m)%x = center
+            bk%r(m)%rho = round_up(rho)
+            bk%r(m)%rin = 0.0_sp
+            if (present(rin)) bk%r(m)%rin = round_down(rin)
+            bk%r(m)%id = i
+            lv%rho_max = max(lv%rho_max, real(bk%r(m)%rho, wp))
          end associate
          lv%count = lv%count + 1
       end associate
@@ -257,7 +266,7 @@ contains
                      b = lv%head(cell)
                      do while (b > 0)
                         do m = self%blocks(b)%n, 1, -1
-                           j = self%blocks(b)%id(m)
+                           j = self%blocks(b)%r(m)%id
                            lim = rho + radii(j)
                            d = centers(:, j) - center
                            if (level_images) then
@@ -358,11 +367,11 @@ contains
                      do while (b > 0)
                         associate (bk => self%blocks(b))
                            do m = 1, bk%n
-                              if (bk%id(m) <= j0) cycle
-                              lim = rho + real(bk%rho(m), wp)
-                              rr = qin + real(bk%rin(m), wp)
+                              if (bk%r(m)%id <= j0) cycle
+                              lim = rho + real(bk%r(m)%rho, wp)
+                              rr = qin + real(bk%r(m)%rin, wp)
                               if (level_images) then
-                                 d = bk%x(:, m) - center
+                                 d = bk%r(m)%x - center
                                  do s3 = -1, 1
                                     do s2 = -1, 1
                                        do s1 = -1, 1
@@ -373,7 +382,7 @@ contains
                                              hit = .true.
                                              return
                                           end if
-                                          call push(cand, shift, ncand, bk%id(m), sh)
+                                          call push(cand, shift, ncand, bk%r(m)%id, sh)
                                        end do
                                     end do
                                  end do
@@ -382,7 +391,7 @@ contains
                               ! the cell's image gives the shift, except along edges whose whole
                               ! range of cells is visited (there: the nearest image)
                               sh = csh
-                              e = bk%x(:, m) - center
+                              e = bk%r(m)%x - center
                               if (anyfull) then
                                  do d3 = 1, 3
                                     if (full(d3)) sh(d3) = nearest_shift(e(d3), half(d3), self%box(d3))
@@ -395,7 +404,7 @@ contains
                                  hit = .true.
                                  return
                               end if
-                              call push(cand, shift, ncand, bk%id(m), sh)
+                              call push(cand, shift, ncand, bk%r(m)%id, sh)
                            end do
                            b = bk%next
                         end associate
