@@ -27,6 +27,10 @@ contains
               new_unittest("cell list equals brute force, periodic, sizes 1000:1", test_cells_periodic), &
               new_unittest("cell list equals brute force, walls", test_cells_walls), &
               new_unittest("cell list finds all images in a small periodic box", test_cells_images), &
+              new_unittest("neighbours: candidates, certain overlaps, jmin = brute force, periodic", &
+                           test_neighbours_periodic), &
+              new_unittest("neighbours: candidates, certain overlaps, jmin = brute force, walls", test_neighbours_walls), &
+              new_unittest("neighbours: all images in a small periodic box", test_neighbours_images), &
               new_unittest("verify: separated spheres pass", test_verify_clear), &
               new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
               new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
@@ -92,6 +96,88 @@ contains
          if (allocated(error)) return
       end do
    end subroutine run_case
+
+   !> `neighbours` against brute force: with rin absent, the candidates (id > jmin) are exactly the
+   !> particles (and images) whose bounding spheres meet the query's; with rin, `hit` is true
+   !> exactly when one of them lies closer than rin + rin_j, and otherwise the candidates are
+   !> complete. Radii log-uniform over rmin..rmax, inscribed radii a random 30-100 % of them.
+   subroutine neighbours_case(error, periodic, box, rmin, rmax, n, nq)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      real(wp), intent(in) :: box(3), rmin, rmax
+      integer, intent(in) :: n, nq
+      type(cell_list_type) :: cl
+      type(rng_type) :: rng
+      real(wp), allocatable :: c(:, :), rho(:), rin(:), shift(:, :)
+      integer, allocatable :: cand(:)
+      real(wp) :: q(3), rq, qin, d(3), lim, lin, r2
+      integer :: i, k, ncand, nbrute, s1, s2, s3, hits, jmin, nin
+      logical :: hit
+      call new_rng(rng, 13_i8, 0_i8)
+      allocate (c(3, n), rho(n), rin(n))
+      call new_cell_list(cl, box, periodic, rmin)
+      do i = 1, n
+         c(:, i) = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rho(i) = rmin * (rmax / rmin)**rng%uniform()
+         rin(i) = rho(i) * (0.3_wp + 0.7_wp * rng%uniform())
+         call cl%insert(i, c(:, i), rho(i), rin=rin(i))
+      end do
+      do k = 1, nq
+         q = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rq = rmin * (rmax / rmin)**rng%uniform()
+         qin = rq * (0.3_wp + 0.7_wp * rng%uniform())
+         jmin = merge(0, int(n * rng%uniform()), mod(k, 2) == 0)
+         nbrute = 0
+         nin = 0
+         do i = jmin + 1, n
+            lim = rq + rho(i)
+            lin = qin + rin(i)
+            d = c(:, i) - q
+            do s3 = -1, 1
+               do s2 = -1, 1
+                  do s1 = -1, 1
+                     if (.not. periodic .and. any([s1, s2, s3] /= 0)) cycle
+                     r2 = sum((d + [s1, s2, s3] * box)**2)
+                     if (r2 < lim * lim) nbrute = nbrute + 1
+                     if (r2 < lin * lin) nin = nin + 1
+                  end do
+               end do
+            end do
+         end do
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, jmin=jmin)
+         call check(error, ncand, nbrute, "candidates vs brute force")
+         if (allocated(error)) return
+         call check(error, .not. hit, "hit without rin")
+         if (allocated(error)) return
+         hits = 0
+         do i = 1, ncand
+            d = c(:, cand(i)) + shift(:, i) - q
+            if (sum(d**2) < (rq + rho(cand(i)))**2 .and. cand(i) > jmin) hits = hits + 1
+         end do
+         call check(error, hits, ncand, "every candidate really intersects and has id > jmin")
+         if (allocated(error)) return
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, rin=qin, jmin=jmin)
+         call check(error, hit .eqv. nin > 0, "certain overlap found iff brute force has one")
+         if (allocated(error)) return
+         if (.not. hit) call check(error, ncand, nbrute, "candidates when no certain overlap")
+         if (allocated(error)) return
+      end do
+   end subroutine neighbours_case
+
+   subroutine test_neighbours_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .true., [20.0_wp, 20.0_wp, 20.0_wp], 0.005_wp, 5.0_wp, 3000, 800)
+   end subroutine test_neighbours_periodic
+
+   subroutine test_neighbours_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .false., [20.0_wp, 15.0_wp, 10.0_wp], 0.01_wp, 2.0_wp, 3000, 2000)
+   end subroutine test_neighbours_walls
+
+   subroutine test_neighbours_images(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .true., [4.0_wp, 4.0_wp, 4.0_wp], 0.5_wp, 1.5_wp, 50, 500)
+   end subroutine test_neighbours_images
 
    subroutine test_cells_periodic(error)
       type(error_type), allocatable, intent(out) :: error

@@ -111,7 +111,7 @@ contains
       real(wp) :: vbox, vol, target, v, sc, rho_min
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
       integer :: s, np, k, b, nstream, nlev, np_frozen, batch, nthreads, batch_size_now
-      integer(i8) :: batch_attempts
+      integer(i8) :: tp1
       logical :: keep, sieve_done
       type(attempt_type), allocatable :: at(:)
       type(void_grid_type) :: vg
@@ -142,8 +142,7 @@ contains
       model%count = 0
       model%shell_fraction = 0.0_wp
       ! particles speculated per batch: any value gives the same model (see phase 2), so the batch
-      ! adapts to the work per particle: large batches amortise the parallel region when particles
-      ! park in a few attempts, small ones limit the speculation wasted when a sieve ends
+      ! adapts to the machine and to the sieve (next_batch)
       nthreads = omp_get_max_threads()
       batch = nthreads
       call system_clock(t0, rate)
@@ -177,6 +176,7 @@ contains
             ! result whatever the batch size and the number of threads.
             allocate (at(batch))
             batch_size_now = batch
+            call system_clock(tp1)
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
             do b = 1, batch
                block
@@ -191,6 +191,7 @@ contains
                end block
             end do
             !$omp end parallel do
+            call system_clock(t1)
             np_frozen = np
             do b = 1, batch
                nstream = nstream + 1
@@ -231,8 +232,7 @@ contains
                if (vg%stale > vg%nfree / 4) call vg%compact()
                if (vg%nfree == 0) sieve_done = .true.
             end if
-            batch_attempts = sum(at%count)
-            batch = nthreads * max(1, min(32, int(4096 * batch_size_now / max(1_i8, batch_attempts))))
+            batch = next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, model%count(s), nthreads)
             deallocate (at)
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
@@ -379,6 +379,25 @@ contains
             order(m + 1) = oi
          end do
       end subroutine likely_first
+
+      !> Size of the next batch. Any size gives the same model, so it follows the machine: about
+      !> `batch_seconds` of phase 1 (few synchronisations, which matters most when the cores are
+      !> shared with other jobs), changing by at most a factor 2 per batch, and not much beyond the
+      !> particles the sieve still needs (speculation past its end is wasted work).
+      pure integer function next_batch(now, seconds, missing, vol_sieve, count_sieve, nthr) result(nb)
+         integer, intent(in) :: now, count_sieve, nthr
+         real(wp), intent(in) :: seconds, missing, vol_sieve
+         real(wp), parameter :: batch_seconds = 0.05_wp
+         integer, parameter :: max_per_thread = 1024
+         real(wp) :: f, need
+         f = 2.0_wp
+         if (seconds > 0.0_wp) f = max(0.5_wp, min(2.0_wp, batch_seconds / seconds))
+         nb = max(nthr, min(max_per_thread * nthr, nint(now * f)))
+         if (count_sieve > 0) then
+            need = max(0.0_wp, missing) / (vol_sieve / count_sieve)
+            nb = max(nthr, min(nb, int(min(need, real(huge(1) / 2, wp))) + nthr))
+         end if
+      end function next_batch
 
       !> Advance an attempt sequence by one attempt (or mark it done).
       subroutine next_attempt(a, sv)
