@@ -81,7 +81,7 @@ contains
       !> false tests every sample, for checking the pruning).
       logical, intent(in), optional :: prune
       type(sampled_type), allocatable :: samp(:)
-      integer, allocatable :: key(:)
+      integer, allocatable :: key(:), kshape(:), korder(:)
       real(wp), allocatable :: rho(:)
       type(cell_list_type) :: cl
       integer :: p, k, nkey
@@ -98,24 +98,31 @@ contains
       else if (allocated(model%min_width)) then
          report%tolerance = 1.0e-4_wp * minval(model%min_width)
       end if
-      ! distinct (shape, order) pairs
-      allocate (key(model%np), samp(model%np))
+      ! distinct (shape, order) pairs (few: one sampled surface each)
+      allocate (key(model%np), kshape(16), korder(16))
       nkey = 0
       do p = 1, model%np
          key(p) = 0
          do k = 1, nkey
-            if (samp(k)%shape == model%shape(p) .and. samp(k)%order == model%nmax(p)) then
+            if (kshape(k) == model%shape(p) .and. korder(k) == model%nmax(p)) then
                key(p) = k
                exit
             end if
          end do
          if (key(p) == 0) then
+            if (nkey == size(kshape)) then
+               kshape = [kshape, kshape]
+               korder = [korder, korder]
+            end if
             nkey = nkey + 1
-            samp(nkey)%shape = model%shape(p)
-            samp(nkey)%order = model%nmax(p)
+            kshape(nkey) = model%shape(p)
+            korder(nkey) = model%nmax(p)
             key(p) = nkey
          end if
       end do
+      allocate (samp(nkey))
+      samp%shape = kshape(:nkey)
+      samp%order = korder(:nkey)
       !$omp parallel do default(none) shared(samp, nkey, model, resolution) private(k) schedule(dynamic)
       do k = 1, nkey
          call sample_shape(model%shapes(samp(k)%shape), samp(k)%order, resolution, samp(k))
@@ -142,6 +149,7 @@ contains
          real(wp), allocatable :: cw(:, :)
          integer :: ncand, i, q
          real(wp) :: d, dw
+         logical :: hit
          allocate (cw(3, model%np))
          do i = 1, model%np
             cw(:, i) = wrap(model%center(:, i))
@@ -153,12 +161,13 @@ contains
                if (dw > report%tolerance) nwall = nwall + 1
                if (dw > depth_max) depth_max = dw
             end if
-            call cl%query(cw(:, p), rho(p), cw, rho, cand, shift, ncand)
+            ! each pair once: (p, q + s) and (q, p - s) are the same pair, so only q >= p; a particle
+            ! may meet its own periodic image in a box smaller than twice its size
+            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmin=p - 1)
             do i = 1, ncand
                q = cand(i)
-               ! each pair once: (p, q + s) and (q, p - s) are the same pair; a particle may meet
-               ! its own periodic image in a box smaller than twice its size
-               if (q < p) cycle
+               ! the stored radii are rounded up: the exact bounding-sphere test
+               if (sum((cw(:, q) + shift(:, i) - cw(:, p))**2) >= (rho(p) + rho(q))**2) cycle
                if (q == p) then
                   if (all(shift(:, i) == 0.0_wp)) cycle
                   if (.not. positive(shift(:, i))) cycle
