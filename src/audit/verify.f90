@@ -251,6 +251,10 @@ contains
                         if (sum((x - d)**2) >= rb2) cycle
                         y = matmul(m, x) + t
                         ly = norm2(y)
+                        ! r_B cannot reach this point deeper than the depth found so far
+                        if (pruned .and. ly > 0.0_wp) then
+                           if (direction_bound(sq, y, ly) - ly <= depth / sb) cycle
+                        end if
                         if (ly == 0.0_wp) then
                            depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
                         else
@@ -336,6 +340,20 @@ contains
          end if
       end if
    end subroutine cap_blocks
+
+   !> The bound of r over the block of directions holding y (|y| = ly > 0).
+   pure real(wp) function direction_bound(sq, y, ly) result(bound)
+      type(sampled_type), intent(in) :: sq
+      real(wp), intent(in) :: y(3), ly
+      real(wp) :: th, ph
+      integer :: ib, jb
+      th = acos(max(-1.0_wp, min(1.0_wp, y(3) / ly)))
+      ph = atan2(y(2), y(1))
+      if (ph < 0.0_wp) ph = ph + 2.0_wp * pi
+      ib = min(sq%nbt, max(1, floor(th / (block * pi / sq%nt)) + 1))
+      jb = min(sq%nbp, max(1, floor(ph / (block * 2.0_wp * pi / sq%np)) + 1))
+      bound = sq%bmax(ib, jb)
+   end function direction_bound
 
    subroutine sample_shape(shape, order, resolution, samp)
       type(sh_expansion_type), intent(in) :: shape
