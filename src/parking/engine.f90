@@ -112,7 +112,9 @@ contains
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
       integer :: s, np, k, b, nstream, nlev, np_frozen, batch, nthreads, batch_size_now
       integer(i8) :: tp1
-      logical :: keep, sieve_done
+      logical :: keep, sieve_done, replaced
+      logical, allocatable :: alone(:)
+      real(wp), allocatable :: bx(:, :), br(:)
       type(attempt_type), allocatable :: at(:)
       type(void_grid_type) :: vg
       logical :: void
@@ -173,7 +175,9 @@ contains
             ! against the frozen packing. Phase 2 (in order): each is re-checked against the
             ! particles accepted before it in this batch and, if hit, continues its own attempt
             ! sequence. Adding particles only adds overlaps, so this is exactly the serial
-            ! result whatever the batch size and the number of threads.
+            ! result whatever the batch size and the number of threads. The re-check is skipped
+            ! for a particle whose bounding sphere meets no earlier one of the batch (found in
+            ! parallel), as long as no earlier particle of the batch has moved.
             allocate (at(batch))
             batch_size_now = batch
             call system_clock(tp1)
@@ -192,11 +196,19 @@ contains
             end do
             !$omp end parallel do
             call system_clock(t1)
+            allocate (bx(3, batch), br(batch), alone(batch))
+            do b = 1, batch
+               bx(:, b) = at(b)%c
+               br(b) = at(b)%sc * kinds(max(1, at(b)%k))%r_out
+            end do
+            call first_in_reach(bx, br, cfg%box, cfg%periodic, alone)
             np_frozen = np
+            replaced = .false.
             do b = 1, batch
                nstream = nstream + 1
-               if (.not. at(b)%done) then
+               if (.not. at(b)%done .and. (replaced .or. .not. alone(b))) then
                   if (.not. fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, np_frozen, cand, cand_shift)) then
+                     replaced = .true.
                      do
                         call next_attempt(at(b), s)
                         if (at(b)%done) exit
@@ -232,6 +244,7 @@ contains
                if (vg%stale > vg%nfree / 4) call vg%compact()
                if (vg%nfree == 0) sieve_done = .true.
             end if
+            deallocate (bx, br, alone)
             batch = next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, model%count(s), nthreads)
             deallocate (at)
             call system_clock(t1)
@@ -511,6 +524,95 @@ contains
          call move_alloc(k2, kind_of)
       end subroutine grow
    end subroutine run_parking
+
+   !> For each sphere (centres x(:, i) in the box, radii r(i)), whether no sphere of smaller index
+   !> meets it (nearest periodic image): spheres hashed into cells at least 2 max(r) wide, the 27
+   !> cells around each searched in parallel.
+   subroutine first_in_reach(x, r, box, periodic, alone)
+      !> Centres (3, n).
+      real(wp), intent(in) :: x(:, :)
+      !> Radii.
+      real(wp), intent(in) :: r(:)
+      !> Box edges.
+      real(wp), intent(in) :: box(3)
+      !> Periodic boundaries.
+      logical, intent(in) :: periodic
+      !> No sphere of smaller index meets sphere i.
+      logical, intent(out) :: alone(:)
+      integer, allocatable :: cell(:, :), first(:), item(:), key(:)
+      integer :: n, nc(3), nbucket, i, d
+      real(wp) :: h(3)
+      n = size(r)
+      alone = .true.
+      if (n < 2) return
+      nc = max(1, int(box / max(2.0_wp * maxval(r), tiny(1.0_wp))))
+      nc = min(nc, 1024)
+      h = box / nc
+      nbucket = 2**ceiling(log(real(2 * n, wp)) / log(2.0_wp))
+      allocate (cell(3, n), key(n), first(nbucket + 1), item(n))
+      do i = 1, n
+         do d = 1, 3
+            cell(d, i) = min(nc(d) - 1, max(0, int(x(d, i) / h(d))))
+         end do
+         key(i) = bucket_of(cell(:, i))
+      end do
+      ! counting sort by bucket, indices ascending within a bucket
+      first = 0
+      do i = 1, n
+         first(key(i) + 1) = first(key(i) + 1) + 1
+      end do
+      do i = 2, nbucket + 1
+         first(i) = first(i) + first(i - 1)
+      end do
+      do i = 1, n
+         first(key(i)) = first(key(i)) + 1
+         item(first(key(i))) = i
+      end do
+      ! first(k) now ends bucket k: bucket k is item(first(k - 1) + 1 : first(k)), bucket 1 from 1
+      !$omp parallel do default(none) shared(n, x, r, box, periodic, nc, cell, first, item, alone) &
+      !$omp& private(i) schedule(static)
+      do i = 2, n
+         alone(i) = nothing_near(i)
+      end do
+      !$omp end parallel do
+   contains
+      pure integer function bucket_of(c) result(k)
+         integer, intent(in) :: c(3)
+         k = 1 + iand(c(1) + 1031 * (c(2) + 1031 * c(3)), nbucket - 1)
+      end function bucket_of
+
+      logical function nothing_near(i) result(ok)
+         integer, intent(in) :: i
+         integer :: d1, d2, d3, c(3), k, m, j, lo
+         real(wp) :: dx(3)
+         ok = .true.
+         do d3 = -1, 1
+            do d2 = -1, 1
+               do d1 = -1, 1
+                  c = cell(:, i) + [d1, d2, d3]
+                  if (periodic) then
+                     c = modulo(c, nc)
+                  else if (any(c < 0 .or. c >= nc)) then
+                     cycle
+                  end if
+                  k = bucket_of(c)
+                  lo = 1
+                  if (k > 1) lo = first(k - 1) + 1
+                  do m = lo, first(k)
+                     j = item(m)
+                     if (j >= i) exit
+                     dx = x(:, j) - x(:, i)
+                     if (periodic) dx = dx - box * anint(dx / box)
+                     if (sum(dx**2) < (r(i) + r(j))**2) then
+                        ok = .false.
+                        return
+                     end if
+                  end do
+               end do
+            end do
+         end do
+      end function nothing_near
+   end subroutine first_in_reach
 
    !> Load the shapes of every sieve (each distinct source once) and precompute every kind.
    subroutine prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
