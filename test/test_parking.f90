@@ -45,6 +45,7 @@ contains
               new_unittest("an unreadable shape folder names the variable", test_bad_source), &
               new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes), &
               new_unittest("1 and 2 threads give the same model", test_threads), &
+              new_unittest("batches give the serial model (dense spheres, shapes with shells)", test_batches), &
               new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void)]
    end subroutine collect_parking
 
@@ -291,10 +292,42 @@ contains
       end do
    end subroutine test_verify_pruning
 
-   subroutine run_nml(name, text, model, error)
+   !> Batches of speculated particles (2 threads, phase 2 re-checks and continuations) against
+   !> the plain serial algorithm (one particle at a time): dense spheres in a small box, where
+   !> particles of a batch often meet, and a shaped mixture with shells.
+   subroutine test_batches(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: nthreads, k
+      character(len=*), parameter :: text(2) = [character(len=400) :: &
+         "&box length = 9, 9, 9 /"//new_line("a")//"&sieves nsieve = 1, min_width = 2, max_width = 2, " &
+         //"fraction = 0.34, source = 'sphere', order = 0 /"//new_line("a")//"&parking max_locations = 20000 /", &
+         "&box length = 7, 7, 7 /"//new_line("a")// &
+         "&sieves nsieve = 2, min_width = 1.5, 0.4, max_width = 1.8, 0.5, fraction = 0.1, 0.08, order = 8, 4 /" &
+         //new_line("a")//"&synthetic count = 4 /"//new_line("a")// &
+         "&shells nlayer = 1, thickness = 0.03, mode = 'exclude' /"//new_line("a")//"&run seed = 6 /"]
+      nthreads = omp_get_max_threads()
+      do k = 1, 2
+         call omp_set_num_threads(1)
+         call run_nml("serial.nml", trim(text(k)), a, error, max_batch=1)
+         call omp_set_num_threads(2)
+         if (.not. allocated(error)) call run_nml("batched.nml", trim(text(k)), b, error)
+         call omp_set_num_threads(nthreads)
+         if (allocated(error)) return
+         print '(a,i0,a,i0,a,i0,a)', "        case ", k, ": ", a%np, " particles, ", a%attempts, " attempts"
+         call check(error, a%np == b%np .and. a%attempts == b%attempts, "particle or attempt counts differ")
+         if (allocated(error)) return
+         call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. &
+                    all(a%scale == b%scale) .and. all(a%shape == b%shape), "batched model differs from the serial one")
+         if (allocated(error)) return
+      end do
+   end subroutine test_batches
+
+   subroutine run_nml(name, text, model, error, max_batch)
       character(len=*), intent(in) :: name, text
       type(model_type), intent(out) :: model
       type(error_type), allocatable, intent(out) :: error
+      integer, intent(in), optional :: max_batch
       type(run_config_type) :: cfg
       type(particle_kind_type), allocatable :: kinds(:)
       integer, allocatable :: kind_of(:)
@@ -305,7 +338,7 @@ contains
       close (unit)
       call read_config("build/test-tmp/"//name, cfg, error)
       if (allocated(error)) return
-      call run_parking(cfg, model, kinds, kind_of, error)
+      call run_parking(cfg, model, kinds, kind_of, error, max_batch=max_batch)
    end subroutine run_nml
 
    subroutine test_rsa_spheres(error)

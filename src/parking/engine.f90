@@ -90,7 +90,7 @@ contains
 
    !> Build the model the configuration asks for. Progress goes to `progress_unit` (stderr in the
    !> program) about every two seconds.
-   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit)
+   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit, max_batch)
       !> Validated configuration.
       type(run_config_type), intent(in) :: cfg
       !> The packed model.
@@ -103,7 +103,11 @@ contains
       type(error_type), allocatable, intent(out) :: error
       !> Unit for progress lines (none when absent).
       integer, intent(in), optional :: progress_unit
+      !> Largest batch of speculated particles (default: no limit; 1 runs the plain serial
+      !> algorithm, which tests use as the reference).
+      integer, intent(in), optional :: max_batch
       type(contact_params_type) :: params
+      integer :: batch_limit
       type(cell_list_type) :: cl
       integer, allocatable :: first_kind(:), nkind_sieve(:)
       real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:), cand_shift(:, :)
@@ -146,7 +150,9 @@ contains
       ! particles speculated per batch: any value gives the same model (see phase 2), so the batch
       ! adapts to the machine and to the sieve (next_batch)
       nthreads = omp_get_max_threads()
-      batch = nthreads
+      batch_limit = huge(1)
+      if (present(max_batch)) batch_limit = max(1, max_batch)
+      batch = min(nthreads, batch_limit)
       call system_clock(t0, rate)
       tlast = t0
 
@@ -245,7 +251,8 @@ contains
                if (vg%nfree == 0) sieve_done = .true.
             end if
             deallocate (bx, br, alone)
-            batch = next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, model%count(s), nthreads)
+            batch = min(batch_limit, next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, &
+                                                model%count(s), nthreads))
             deallocate (at)
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
