@@ -27,9 +27,9 @@ contains
               new_unittest("cell list equals brute force, periodic, sizes 1000:1", test_cells_periodic), &
               new_unittest("cell list equals brute force, walls", test_cells_walls), &
               new_unittest("cell list finds all images in a small periodic box", test_cells_images), &
-              new_unittest("neighbours: candidates, certain overlaps, jmin = brute force, periodic", &
+              new_unittest("neighbours: candidates, certain overlaps, id range = brute force, periodic", &
                            test_neighbours_periodic), &
-              new_unittest("neighbours: candidates, certain overlaps, jmin = brute force, walls", test_neighbours_walls), &
+              new_unittest("neighbours: candidates, certain overlaps, id range = brute force, walls", test_neighbours_walls), &
               new_unittest("neighbours: all images in a small periodic box", test_neighbours_images), &
               new_unittest("verify: separated spheres pass", test_verify_clear), &
               new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
@@ -98,7 +98,7 @@ contains
       end do
    end subroutine run_case
 
-   !> `neighbours` against brute force: with rin absent, the candidates (id > jmin) are exactly the
+   !> `neighbours` against brute force: with rin absent, the candidates (jmin < id <= jmax) are the
    !> particles (and images) whose bounding spheres meet the query's; with rin, `hit` is true
    !> exactly when one of them lies closer than rin + rin_j, and otherwise the candidates are
    !> complete. Radii log-uniform over rmin..rmax, inscribed radii a random 30-100 % of them.
@@ -112,7 +112,7 @@ contains
       real(wp), allocatable :: c(:, :), rho(:), rin(:), shift(:, :)
       integer, allocatable :: cand(:)
       real(wp) :: q(3), rq, qin, d(3), lim, lin, r2
-      integer :: i, k, ncand, nbrute, s1, s2, s3, hits, jmin, nin
+      integer :: i, k, ncand, nbrute, s1, s2, s3, hits, jmin, jmax, nin
       logical :: hit
       call new_rng(rng, 13_i8, 0_i8)
       allocate (c(3, n), rho(n), rin(n))
@@ -128,9 +128,10 @@ contains
          rq = rmin * (rmax / rmin)**rng%uniform()
          qin = rq * (0.3_wp + 0.7_wp * rng%uniform())
          jmin = merge(0, int(n * rng%uniform()), mod(k, 2) == 0)
+         jmax = merge(n, jmin + int((n - jmin) * rng%uniform()), mod(k, 3) /= 0)
          nbrute = 0
          nin = 0
-         do i = jmin + 1, n
+         do i = jmin + 1, jmax
             lim = rq + rho(i)
             lin = qin + rin(i)
             d = c(:, i) - q
@@ -145,7 +146,7 @@ contains
                end do
             end do
          end do
-         call cl%neighbours(q, rq, cand, shift, ncand, hit, jmin=jmin)
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, jmin=jmin, jmax=jmax)
          call check(error, ncand, nbrute, "candidates vs brute force")
          if (allocated(error)) return
          call check(error, .not. hit, "hit without rin")
@@ -153,11 +154,11 @@ contains
          hits = 0
          do i = 1, ncand
             d = c(:, cand(i)) + shift(:, i) - q
-            if (sum(d**2) < (rq + rho(cand(i)))**2 .and. cand(i) > jmin) hits = hits + 1
+            if (sum(d**2) < (rq + rho(cand(i)))**2 .and. cand(i) > jmin .and. cand(i) <= jmax) hits = hits + 1
          end do
-         call check(error, hits, ncand, "every candidate really intersects and has id > jmin")
+         call check(error, hits, ncand, "every candidate intersects, jmin < id <= jmax")
          if (allocated(error)) return
-         call cl%neighbours(q, rq, cand, shift, ncand, hit, rin=qin, jmin=jmin)
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, rin=qin, jmin=jmin, jmax=jmax)
          call check(error, hit .eqv. nin > 0, "certain overlap found iff brute force has one")
          if (allocated(error)) return
          if (.not. hit) call check(error, ncand, nbrute, "candidates when no certain overlap")

@@ -161,9 +161,11 @@ contains
                if (dw > report%tolerance) nwall = nwall + 1
                if (dw > depth_max) depth_max = dw
             end if
-            ! each pair once: (p, q + s) and (q, p - s) are the same pair, so only q >= p; a particle
-            ! may meet its own periodic image in a box smaller than twice its size
-            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmin=p - 1)
+            ! each pair once: (p, q + s) and (q, p - s) are the same pair, so only q <= p (a large
+            ! particle, parked first, then shares its many pairs with the small ones instead of
+            ! keeping them all on one thread); a particle may meet its own periodic image in a box
+            ! smaller than twice its size
+            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmax=p)
             do i = 1, ncand
                q = cand(i)
                ! the stored radii are rounded up: the exact bounding-sphere test
@@ -181,7 +183,7 @@ contains
                   !$omp critical (verify_worst)
                   if (d > worst_depth) then
                      worst_depth = d
-                     report%worst = [p, q]
+                     report%worst = [q, p]
                   end if
                   !$omp end critical (verify_worst)
                end if

@@ -297,14 +297,15 @@ contains
       end do
    end subroutine query
 
-   !> Candidates among the stored particles with id > jmin (default 0) for an overlap test with a
-   !> particle of bounding sphere (center, rho): cand(1:ncand) with image shifts shift(:, 1:ncand)
+   !> Candidates among the stored particles with jmin < id <= jmax (default: all) for an overlap
+   !> test with a particle of bounding sphere (center, rho): cand(1:ncand) with image shifts
+   !> shift(:, 1:ncand)
    !> (the image of j meeting the query has centre x_j + shift) whose stored bounding spheres
    !> intersect it. With `rin`, the search stops as soon as a stored particle j lies closer than
    !> rin + rin_j (the radii given to `insert`): then `hit` is true and the list is incomplete.
    !> Visiting order: levels from the coarsest; in a level the query's own cell first, then the
    !> cells outwards, nearer side first (so that a certain overlap is found early).
-   pure subroutine neighbours(self, center, rho, cand, shift, ncand, hit, rin, jmin)
+   pure subroutine neighbours(self, center, rho, cand, shift, ncand, hit, rin, jmin, jmax)
       !> Cell list.
       class(cell_list_type), intent(in) :: self
       !> Query centre (inside the box).
@@ -324,8 +325,10 @@ contains
       real(wp), intent(in), optional :: rin
       !> Only ids above jmin count.
       integer, intent(in), optional :: jmin
+      !> Only ids up to jmax count.
+      integer, intent(in), optional :: jmax
       integer :: k, lo(3), hi(3), own(3), side(3), na(3), nb(3), t1, t2, t3, i1, i2, i3, c1, c2, c3
-      integer :: cell, s1, s2, s3, d3, b, m, j0
+      integer :: cell, s1, s2, s3, d3, b, m, j0, j1
       real(wp) :: reach, d(3), e(3), sh(3), csh(3), lim, half(3), qin, rr, r2
       logical :: level_images, full(3), anyfull, use_in
       ncand = 0
@@ -337,6 +340,8 @@ contains
       if (use_in) qin = rin
       j0 = 0
       if (present(jmin)) j0 = jmin
+      j1 = huge(1)
+      if (present(jmax)) j1 = jmax
       do k = size(self%levels), 1, -1
          associate (lv => self%levels(k))
             if (lv%count == 0) cycle
@@ -367,7 +372,7 @@ contains
                      do while (b > 0)
                         associate (bk => self%blocks(b))
                            do m = 1, bk%n
-                              if (bk%r(m)%id <= j0) cycle
+                              if (bk%r(m)%id <= j0 .or. bk%r(m)%id > j1) cycle
                               lim = rho + real(bk%r(m)%rho, wp)
                               rr = qin + real(bk%r(m)%rin, wp)
                               if (level_images) then
