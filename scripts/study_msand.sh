@@ -2,7 +2,8 @@
 # Thesis section 3.4 study: M_sand with shaped sand (Table 3.1, Figs 3.8-3.10) and with spherical
 # sand (Table 3.2, Figs 3.11-3.13). Runs inputs/msand.nml and inputs/msand_spheres.nml (unless
 # their model files exist; --rerun forces), then the PSD tables, g(t) at rho_s = 1 and the
-# convergence in rho_s. Results in out/studies/msand/, figures copied to docs/figures/.
+# convergence in rho_s, and (shaped sand, default shells) the slices at rho_s = 1 against the 3D
+# value (Eq 3.11, docs/walleffect.md). Results in out/studies/msand/, figures copied to docs/figures/.
 # Needs ../shared/shapes. Usage: bash scripts/study_msand.sh [--rerun]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,4 +27,8 @@ for case in model:msand model-spheres:msand_spheres; do
       --csv "$out/$nml-conv.csv" --png "$out/$nml-conv.png" --rdf-png "$out/$nml-rdf.png" > "$out/$nml-conv.txt"
    cp "$out/$nml-conv.png" "$out/$nml-rdf.png" docs/figures/
 done
+# Eq 3.11 on M_sand (docs/walleffect.md): slices at rho_s = 1 against the 3D value, default shells
+/usr/bin/time -f "msand rdf --volume: %e s" anm_post rdf out/msand/model.h5 --density 1 --volume \
+   --csv "$out/msand-rdf-3d.csv" --png "$out/msand-rdf-3d.png" > "$out/msand-rdf-3d.txt"
+cp "$out/msand-rdf-3d.png" docs/figures/
 echo "study_msand: tables and plots in $out, figures in docs/figures"

@@ -14,16 +14,18 @@ sieves) A_ik^s. The small-particle fraction of layer k (Eq 3.10) and g (Eq 3.11)
 Per-slice values g_ik = A_ik^s / (A_ik phi_B) over the slices that cut layer k give the mean and
 standard deviation plotted as error bars (Fig 3.8); the standard error of g_k is that of a ratio
 estimator over blocks of consecutive slices spanning the widest small particle (closer slices cut
-the same particles and are not independent). `volume_fractions` estimates phi_k directly in the volume with
-uniform Monte Carlo points (no slices), so Eq 3.11 can be checked numerically.
+the same particles and are not independent). `volume_fractions` measures phi_k directly in the
+volume (a stratified random sample of each layer with the slicer's own surfaces, no slices; its
+standard error from independent replicates), so Eq 3.11 can be checked numerically.
 
 Library API:
     spec = RdfSpec(particle=None, n_shells=10, t_min=0.005, t_max=0.05, unit="fraction", axis="x",
                    pixel=0.05, density=1.0, small_sieves=None, small_below=None, phi_b=None)
-    res = rdf(model, spec)                       # RdfResult (per layer: t, g, mean, sd, se, counts)
-    vol = volume_fractions(model, spec, n_points=2_000_000, seed=1)   # 3D phi_k and its error
-    res.to_csv("g.csv"); plot_rdf(res, "g.png", volume=vol)
-    conv = convergence(model, spec, densities=(0.05, 0.1, 0.25, 0.5, 1.0))
+    st = prepare(model, spec)                    # shared by the calls below (optional)
+    res = rdf(model, spec, setup=st)             # RdfResult (per layer: t, g, mean, sd, se, counts)
+    vol = volume_fractions(model, spec, spacing=0.05, replicates=8, setup=st)   # 3D phi_k, its s.e.
+    res.to_csv("g.csv", vol); plot_rdf(res, "g.png", volume=vol)
+    conv = convergence(model, spec, densities=(0.05, 0.1, 0.25, 0.5, 1.0), setup=st)
 """
 from __future__ import annotations
 
@@ -564,22 +566,39 @@ def _save(fig, plt, path: str | Path, option: str) -> Path:
 
 def plot_rdf(res: RdfResult, path: str | Path, volume: VolumeResult | None = None, title: str = "") -> Path:
     """Bar plot of g per layer (bar width = layer thickness) with the per-slice standard deviation as
-    error bars (thesis Fig 3.8); the 3D values (volume_fractions) as points when given; g = 1 dashed."""
+    error bars (thesis Fig 3.8); g = 1 dashed. With the 3D values (volume_fractions) they are drawn
+    as points, and a second panel shows the check of Eq 3.11: g_slices - g_3D per layer against
+    the slices' standard error (band) with the 3D standard error as error bars."""
     plt = _figure()
-    fig, ax = plt.subplots(figsize=(6.4, 4))
+    if volume is None:
+        fig, ax = plt.subplots(figsize=(6.4, 4))
+    else:
+        fig, (ax, ax2) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True, height_ratios=(2, 1))
     width = res.t_outer - res.t_inner
     ax.bar(res.t_inner, res.g, width=width, align="edge", color="#9ecae1", edgecolor="#3182bd",
            label=f"slices (rho_s = {res.density:g}, N = {len(res.positions)})")
     ax.errorbar(res.t_mid, res.g, yerr=res.g_sd, fmt="none", ecolor="#08306b", capsize=3, label="per-slice s.d.")
     if volume is not None:
-        ax.errorbar(res.t_mid, volume.phi / res.phi_b, yerr=volume.phi_se / res.phi_b, fmt="o", ms=4,
-                    color="#d62728", capsize=2, label="3D (volume sample, no slices)")
+        g3, se3 = volume.phi / res.phi_b, volume.phi_se / res.phi_b
+        ax.errorbar(res.t_mid, g3, yerr=se3, fmt="o", ms=4, color="#d62728", capsize=2,
+                    label="3D (volume sample, no slices)")
+        edges = np.concatenate([res.t_inner, res.t_outer[-1:]])
+        se = np.concatenate([res.g_se, res.g_se[-1:]])
+        ax2.fill_between(edges, -se, se, step="post", color="#9ecae1", alpha=0.6,
+                         label="+- standard error of the slice estimate")
+        ax2.errorbar(res.t_mid, res.g - g3, yerr=se3, fmt="o", ms=4, color="#d62728", capsize=2,
+                     label="g_slices - g_3D (bars: 3D standard error)")
+        ax2.axhline(0.0, color="grey", lw=1)
+        ax2.set_xlabel("distance t from the particle surface (mm)")
+        ax2.set_ylabel("g_slices - g_3D")
+        ax2.legend(fontsize=7, loc="lower left")
+    else:
+        ax.set_xlabel("distance t from the particle surface (mm)")
     ax.axhline(1.0, ls="--", color="grey", lw=1)
-    ax.set_xlabel("distance t from the particle surface (mm)")
     ax.set_ylabel("g(t) = phi_shell / phi_B")
     ax.set_title(title or f"g(t) around particle {res.particle} (L = {res.length:.3g} mm, "
                           f"phi_B = {res.phi_b:.3f}, R_s = {res.pixel:g} mm)", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     return _save(fig, plt, path, "--png")
 
