@@ -42,8 +42,8 @@ module anm_shells_offset
    integer, parameter :: max_newton = 30
    !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
    real(wp), parameter :: pole_sin = 1.0e-6_wp
-   !> Points per call of `eval_surface_many`.
-   integer, parameter :: eval_block = 256
+   !> Directions per chunk of the first Newton pass (its working arrays, some 30 kB, stay in cache).
+   integer, parameter :: chunk = 256
    !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
    integer, parameter :: step_lanes = 32
 
@@ -202,9 +202,10 @@ contains
       end do
    end subroutine offset_grid
 
-   !> Newton from every node's sampled start, all directions together: the first step from the
-   !> tabulated derivatives, then rounds of exact evaluations of the directions still running,
-   !> `eval_block` points per call of `eval_surface_many`.
+   !> Newton from every node's sampled start, `chunk` directions at a time (each direction's
+   !> iteration is independent): the first step from the tabulated derivatives, then rounds of
+   !> exact evaluations of the directions of the chunk still running, `newton_lanes` and
+   !> `eval_surface_many` on groups of lanes. The working arrays are per chunk (small, on the stack).
    pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t, lower(:, :), tol
@@ -212,94 +213,95 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp), allocatable :: ts(:), ps(:), f(:, :), sc(:, :), bt(:), bp(:), bf(:, :), bsc(:, :)
-      integer, allocatable :: state(:), run(:), next(:)
+      real(wp) :: ts(chunk), ps(chunk), f(6, chunk), sc(4, chunk), bt(chunk), bp(chunk)
+      integer :: state(chunk), run(chunk), next(chunk)
       real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
       real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
       real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
       integer :: lstate(step_lanes)
-      integer :: nt, np, n, k, i, j, it, nrun, nnext, b0, b1, is, js, lm, l, nl
+      integer :: nt, np, n, k, c, c0, nc, i, j, it, nrun, nnext, b0, is, js, lm, l, nl
 
       nt = size(rt, 1)
       np = size(rt, 2)
       n = nt * np
       lm = surf%grid%lmax
-      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), next(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
-                bsc(4, eval_block))
-      do j = 1, np
-         do i = 1, nt
-            k = i + (j - 1) * nt
-            is = start(1, i, j)
-            js = start(2, i, j)
-            ts(k) = surf%grid%sphere%theta(is)
-            ps(k) = surf%grid%sphere%phi(js)
-            ! sin/cos of the start node from the grid's tables
-            sc(:, k) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
-            state(k) = newton_state%running
-         end do
-      end do
       rt = 0.0_wp
       fx = 0.0_wp
-      nrun = n
-      run = [(k, k = 1, n)]
-      do it = 1, max_newton
-         ! one Newton step for the running directions, `step_lanes` at a time
-         nnext = 0
-         do b0 = 1, nrun, step_lanes
-            nl = min(step_lanes, nrun - b0 + 1)
-            do l = 1, step_lanes
-               ! short groups repeat their first direction (results discarded)
-               k = run(b0 + merge(l, 1, l <= nl) - 1)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
-               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
-               lrn(l) = surf%r(i, j)
-               if (it == 1) then
-                  ! the first step from the tabulated derivatives of the start sample
-                  lf(l, :) = surf%f(:, start(1, i, j), start(2, i, j))
-               else
-                  lf(l, :) = f(:, k)
-               end if
-               lsc(l, :) = sc(:, k)
-               lts(l) = ts(k)
-               lps(l) = ps(k)
-            end do
-            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
-            do l = 1, nl
-               k = run(b0 + l - 1)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
-               ts(k) = lts(l)
-               ps(k) = lps(l)
-               state(k) = lstate(l)
-               if (lstate(l) == newton_state%running) then
-                  nnext = nnext + 1
-                  next(nnext) = k
-               else if (lstate(l) == newton_state%converged) then
-                  rt(i, j) = lrho(l)
-                  fx(:, i, j) = lxf(l, :)
-               end if
-            end do
+      do c0 = 1, n, chunk
+         nc = min(chunk, n - c0 + 1)
+         ! chunk entry c is direction k = c0 + c - 1, node (i, j)
+         do c = 1, nc
+            k = c0 + c - 1
+            i = 1 + modulo(k - 1, nt)
+            j = 1 + (k - 1) / nt
+            is = start(1, i, j)
+            js = start(2, i, j)
+            ts(c) = surf%grid%sphere%theta(is)
+            ps(c) = surf%grid%sphere%phi(js)
+            ! sin/cos of the start node from the grid's tables
+            sc(:, c) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
+            ! the first step from the tabulated derivatives of the start sample
+            f(:, c) = surf%f(:, is, js)
+            state(c) = newton_state%running
+            run(c) = c
          end do
-         nrun = nnext
-         run(1:nrun) = next(1:nrun)
-         if (nrun == 0) exit
-         do b0 = 1, nrun, eval_block
-            b1 = min(nrun, b0 + eval_block - 1)
-            bt(1:b1 - b0 + 1) = ts(run(b0:b1))
-            bp(1:b1 - b0 + 1) = ps(run(b0:b1))
-            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1), bsc(:, 1:b1 - b0 + 1))
-            f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
-            sc(:, run(b0:b1)) = bsc(:, 1:b1 - b0 + 1)
+         nrun = nc
+         do it = 1, max_newton
+            ! one Newton step for the running directions, `step_lanes` at a time
+            nnext = 0
+            do b0 = 1, nrun, step_lanes
+               nl = min(step_lanes, nrun - b0 + 1)
+               do l = 1, step_lanes
+                  ! short groups repeat their first direction (results discarded)
+                  c = run(b0 + merge(l, 1, l <= nl) - 1)
+                  k = c0 + c - 1
+                  i = 1 + modulo(k - 1, nt)
+                  j = 1 + (k - 1) / nt
+                  call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
+                  lrn(l) = surf%r(i, j)
+                  lf(l, :) = f(:, c)
+                  lsc(l, :) = sc(:, c)
+                  lts(l) = ts(c)
+                  lps(l) = ps(c)
+               end do
+               call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+               do l = 1, nl
+                  c = run(b0 + l - 1)
+                  k = c0 + c - 1
+                  i = 1 + modulo(k - 1, nt)
+                  j = 1 + (k - 1) / nt
+                  ts(c) = lts(l)
+                  ps(c) = lps(l)
+                  state(c) = lstate(l)
+                  if (lstate(l) == newton_state%running) then
+                     nnext = nnext + 1
+                     next(nnext) = c
+                  else if (lstate(l) == newton_state%converged) then
+                     rt(i, j) = lrho(l)
+                     fx(:, i, j) = lxf(l, :)
+                  end if
+               end do
+            end do
+            nrun = nnext
+            run(1:nrun) = next(1:nrun)
+            if (nrun == 0) exit
+            bt(1:nrun) = ts(run(1:nrun))
+            bp(1:nrun) = ps(run(1:nrun))
+            call eval_surface_many(surf, bt(1:nrun), bp(1:nrun), f(:, 1:nrun), sc(:, 1:nrun))
+            ! f and sc were filled in run order: move them to their entries (run is increasing)
+            do l = nrun, 1, -1
+               f(:, run(l)) = f(:, l)
+               sc(:, run(l)) = sc(:, l)
+            end do
+            nev = nev + nrun
          end do
-         nev = nev + nrun
-      end do
-      do j = 1, np
-         do i = 1, nt
-            k = i + (j - 1) * nt
-            solved(i, j) = state(k) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
+         do c = 1, nc
+            k = c0 + c - 1
+            i = 1 + modulo(k - 1, nt)
+            j = 1 + (k - 1) / nt
+            solved(i, j) = state(c) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
             if (.not. solved(i, j)) rt(i, j) = 0.0_wp
-            foot(:, i, j) = [ts(k), ps(k)]
+            foot(:, i, j) = [ts(c), ps(c)]
          end do
       end do
    end subroutine first_pass
