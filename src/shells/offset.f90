@@ -42,8 +42,8 @@ module anm_shells_offset
    integer, parameter :: max_newton = 30
    !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
    real(wp), parameter :: pole_sin = 1.0e-6_wp
-   !> Directions per chunk of the first Newton pass (its working arrays, some 30 kB, stay in cache).
-   integer, parameter :: chunk = 256
+   !> Slots of the first Newton pass (directions in flight; its working arrays, some 110 kB).
+   integer, parameter :: pool = 1024
    !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
    integer, parameter :: step_lanes = 32
 
@@ -202,10 +202,13 @@ contains
       end do
    end subroutine offset_grid
 
-   !> Newton from every node's sampled start, `chunk` directions at a time (each direction's
-   !> iteration is independent): the first step from the tabulated derivatives, then rounds of
-   !> exact evaluations of the directions of the chunk still running, `newton_lanes` and
-   !> `eval_surface_many` on groups of lanes. The working arrays are per chunk (small, on the stack).
+   !> Newton from every node's sampled start, each direction independently, through a pool of
+   !> `pool` slots: directions enter the pool in order with the tabulated derivatives of their
+   !> start sample (the first step needs no evaluation); each round takes one Newton step for every
+   !> slot (`newton_lanes`, `step_lanes` at a time), retires the finished directions and evaluates
+   !> the expansion at the new points of the others (`eval_surface_many`). The groups of lanes stay
+   !> full (only the last group of a round is short) and the working arrays are per slot (small,
+   !> on the stack) instead of per direction of the grid.
    pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t, lower(:, :), tol
@@ -213,13 +216,13 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp) :: ts(chunk), ps(chunk), f(6, chunk), sc(4, chunk), bt(chunk), bp(chunk)
-      integer :: state(chunk), run(chunk), next(chunk)
+      real(wp) :: ts(pool), ps(pool), f(6, pool), sc(4, pool)
+      integer :: dir(pool), steps(pool)
       real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
       real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
       real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
       integer :: lstate(step_lanes)
-      integer :: nt, np, n, k, c, c0, nc, i, j, it, nrun, nnext, b0, is, js, lm, l, nl
+      integer :: nt, np, n, k, knext, na, nkeep, i, j, b0, is, js, lm, l, nl, c
 
       nt = size(rt, 1)
       np = size(rt, 2)
@@ -227,82 +230,77 @@ contains
       lm = surf%grid%lmax
       rt = 0.0_wp
       fx = 0.0_wp
-      do c0 = 1, n, chunk
-         nc = min(chunk, n - c0 + 1)
-         ! chunk entry c is direction k = c0 + c - 1, node (i, j)
-         do c = 1, nc
-            k = c0 + c - 1
+      knext = 1
+      na = 0
+      do
+         ! fill the free slots with the next directions (node (i, j) is direction i + (j - 1) nt)
+         do while (na < pool .and. knext <= n)
+            na = na + 1
+            k = knext
+            knext = knext + 1
             i = 1 + modulo(k - 1, nt)
             j = 1 + (k - 1) / nt
             is = start(1, i, j)
             js = start(2, i, j)
-            ts(c) = surf%grid%sphere%theta(is)
-            ps(c) = surf%grid%sphere%phi(js)
-            ! sin/cos of the start node from the grid's tables
-            sc(:, c) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
-            ! the first step from the tabulated derivatives of the start sample
-            f(:, c) = surf%f(:, is, js)
-            state(c) = newton_state%running
-            run(c) = c
+            dir(na) = k
+            steps(na) = 0
+            ts(na) = surf%grid%sphere%theta(is)
+            ps(na) = surf%grid%sphere%phi(js)
+            ! sin/cos of the start node from the grid's tables, derivatives from the sample's table
+            sc(:, na) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
+            f(:, na) = surf%f(:, is, js)
          end do
-         nrun = nc
-         do it = 1, max_newton
-            ! one Newton step for the running directions, `step_lanes` at a time
-            nnext = 0
-            do b0 = 1, nrun, step_lanes
-               nl = min(step_lanes, nrun - b0 + 1)
-               do l = 1, step_lanes
-                  ! short groups repeat their first direction (results discarded)
-                  c = run(b0 + merge(l, 1, l <= nl) - 1)
-                  k = c0 + c - 1
-                  i = 1 + modulo(k - 1, nt)
-                  j = 1 + (k - 1) / nt
-                  call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
-                  lrn(l) = surf%r(i, j)
-                  lf(l, :) = f(:, c)
-                  lsc(l, :) = sc(:, c)
-                  lts(l) = ts(c)
-                  lps(l) = ps(c)
-               end do
-               call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
-               do l = 1, nl
-                  c = run(b0 + l - 1)
-                  k = c0 + c - 1
-                  i = 1 + modulo(k - 1, nt)
-                  j = 1 + (k - 1) / nt
-                  ts(c) = lts(l)
-                  ps(c) = lps(l)
-                  state(c) = lstate(l)
-                  if (lstate(l) == newton_state%running) then
-                     nnext = nnext + 1
-                     next(nnext) = c
-                  else if (lstate(l) == newton_state%converged) then
-                     rt(i, j) = lrho(l)
-                     fx(:, i, j) = lxf(l, :)
-                  end if
-               end do
+         if (na == 0) exit
+         ! one Newton step for every slot, `step_lanes` at a time; the running ones are kept in order
+         nkeep = 0
+         do b0 = 1, na, step_lanes
+            nl = min(step_lanes, na - b0 + 1)
+            do l = 1, step_lanes
+               ! short groups repeat their first direction (results discarded)
+               c = b0 + merge(l, 1, l <= nl) - 1
+               k = dir(c)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
+               lrn(l) = surf%r(i, j)
+               lf(l, :) = f(:, c)
+               lsc(l, :) = sc(:, c)
+               lts(l) = ts(c)
+               lps(l) = ps(c)
             end do
-            nrun = nnext
-            run(1:nrun) = next(1:nrun)
-            if (nrun == 0) exit
-            bt(1:nrun) = ts(run(1:nrun))
-            bp(1:nrun) = ps(run(1:nrun))
-            call eval_surface_many(surf, bt(1:nrun), bp(1:nrun), f(:, 1:nrun), sc(:, 1:nrun))
-            ! f and sc were filled in run order: move them to their entries (run is increasing)
-            do l = nrun, 1, -1
-               f(:, run(l)) = f(:, l)
-               sc(:, run(l)) = sc(:, l)
+            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+            do l = 1, nl
+               c = b0 + l - 1
+               k = dir(c)
+               i = 1 + modulo(k - 1, nt)
+               j = 1 + (k - 1) / nt
+               if (lstate(l) == newton_state%running .and. steps(c) + 1 < max_newton) then
+                  ! (nkeep <= c: the slot moves down or stays)
+                  nkeep = nkeep + 1
+                  dir(nkeep) = k
+                  steps(nkeep) = steps(c) + 1
+                  ts(nkeep) = lts(l)
+                  ps(nkeep) = lps(l)
+                  cycle
+               end if
+               ! retired: converged, failed, or still running after max_newton steps (whose
+               ! evaluation after the last step is counted as in a plain loop over the steps)
+               if (lstate(l) == newton_state%running) nev = nev + 1
+               solved(i, j) = .false.
+               if (lstate(l) == newton_state%converged) then
+                  rt(i, j) = lrho(l)
+                  fx(:, i, j) = lxf(l, :)
+                  solved(i, j) = rt(i, j) >= lower(i, j) - tol
+               end if
+               if (.not. solved(i, j)) rt(i, j) = 0.0_wp
+               foot(:, i, j) = [lts(l), lps(l)]
             end do
-            nev = nev + nrun
          end do
-         do c = 1, nc
-            k = c0 + c - 1
-            i = 1 + modulo(k - 1, nt)
-            j = 1 + (k - 1) / nt
-            solved(i, j) = state(c) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
-            if (.not. solved(i, j)) rt(i, j) = 0.0_wp
-            foot(:, i, j) = [ts(c), ps(c)]
-         end do
+         na = nkeep
+         if (na > 0) then
+            call eval_surface_many(surf, ts(1:na), ps(1:na), f(:, 1:na), sc(:, 1:na))
+            nev = nev + na
+         end if
       end do
    end subroutine first_pass
 
