@@ -358,25 +358,33 @@ contains
       real(wp), intent(in) :: t
       real(wp), intent(out) :: lower(:, :)
       integer, intent(out) :: start(:, :, :)
-      real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
-      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
+      real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
+      real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
+      real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
       real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0
-      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3)
       logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
       dphi = two_pi / np
-      allocate (qd(3, nt, np), qth(nt, np), qph(nt, np), align(nt, np), xx(nt, np))
+      allocate (qth(nt, np), qph(nt, np), align(nt, np), qx(nt), qy(nt), qz(nt), qn(nt), bthlo(nt), bthhi(nt), &
+                bphlo(nt), bphhi(nt))
+      ! offset directions (x + t n) / |x + t n| of the samples, their polar angles and azimuths
+      ! (one column at a time in plain loops: the compiler vectorises acos and atan2)
       do j = 1, np
          do i = 1, nt
-            q = surf%x(:, i, j) + t * surf%n(:, i, j)
-            qd(:, i, j) = q / sqrt(dot_product(q, q))
-            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
-            qph(i, j) = atan2(qd(2, i, j), qd(1, i, j))
-            xx(i, j) = dot_product(surf%x(:, i, j), surf%x(:, i, j))
-            start(:, i, j) = [i, j]
+            qx(i) = surf%x(1, i, j) + t * surf%n(1, i, j)
+            qy(i) = surf%x(2, i, j) + t * surf%n(2, i, j)
+            qz(i) = surf%x(3, i, j) + t * surf%n(3, i, j)
+            qn(i) = sqrt(qx(i) * qx(i) + qy(i) * qy(i) + qz(i) * qz(i))
          end do
+         do i = 1, nt
+            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qz(i) / qn(i))))
+            qph(i, j) = atan2(qy(i) / qn(i), qx(i) / qn(i))
+         end do
+         start(1, :, j) = [(i, i = 1, nt)]
+         start(2, :, j) = j
       end do
       do kc = 1, 2
          ii = merge(1, nt, kc == 1)
@@ -392,23 +400,38 @@ contains
       mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
-         do i = 1, nt
-            ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
-            ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1,
-            ! and across a pole the pole's offset direction (the polar triangles). Every pair
-            ! (node, corner) of a cell box is in it; near the poles, where a cell's box is a whole
-            ! ring, each pair is tried once instead of once per cell.
-            ph0 = qph(i, j)
-            thlo = pi
-            thhi = 0.0_wp
-            phlo = 0.0_wp
-            phhi = 0.0_wp
-            do jc = -1, 1
-               jb = 1 + modulo(j + jc - 1, np)
-               do ii = max(1, i - 1), min(nt, i + 1)
-                  call widen(qth(ii, jb), qph(ii, jb), ph0, thlo, thhi, phlo, phhi)
+         ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
+         ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1
+         ! (azimuths relative to the sample's own, unwrapped), and across a pole the pole's offset
+         ! direction (the polar triangles). Every pair (node, corner) of a cell box is in it; near
+         ! the poles, where a cell's box is a whole ring, each pair is tried once instead of once
+         ! per cell. The boxes of a column first, in plain loops over the rows.
+         jn = [1 + modulo(j - 2, np), j, 1 + modulo(j, np)]
+         bthlo = pi
+         bthhi = 0.0_wp
+         bphlo = 0.0_wp
+         bphhi = 0.0_wp
+         do jc = 1, 3
+            jb = jn(jc)
+            do ii = -1, 1
+               do i = max(1, 1 - ii), min(nt, nt - ii)
+                  bthlo(i) = min(bthlo(i), qth(i + ii, jb))
+                  bthhi(i) = max(bthhi(i), qth(i + ii, jb))
+                  ! qph values are atan2 values in [-pi, pi]: one turn at most brings the
+                  ! difference into [-pi, pi)
+                  d = qph(i + ii, jb) - qph(i, j)
+                  d = merge(d - two_pi, merge(d + two_pi, d, d < -pi), d >= pi)
+                  bphlo(i) = min(bphlo(i), d)
+                  bphhi(i) = max(bphhi(i), d)
                end do
             end do
+         end do
+         do i = 1, nt
+            ph0 = qph(i, j)
+            thlo = bthlo(i)
+            thhi = bthhi(i)
+            phlo = bphlo(i)
+            phhi = bphhi(i)
             if (i == 1 .or. i == nt) then
                pole = pole_dir(:, merge(1, 2, i == 1))
                d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
@@ -420,10 +443,12 @@ contains
                   call widen(d, atan2(pole(2), pole(1)), ph0, thlo, thhi, phlo, phhi)
                end if
             end if
+            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            qd = q / sqrt(dot_product(q, q))
             all_phi = phhi - phlo > pi
             if (all_phi) then
                ! the patch holds a pole
-               if (qd(3, i, j) > 0.0_wp) then
+               if (qd(3) > 0.0_wp) then
                   thlo = 0.0_wp
                else
                   thhi = pi
@@ -440,9 +465,11 @@ contains
                ncol = floor(phhi / dphi) + 2 - j0
             end if
             xs = surf%x(:, i, j)
-            xxs = xx(i, j)
+            xxs = dot_product(xs, xs)
+            ja = 1 + modulo(j0 - 2, np)
             do jc = 1, ncol
-               ja = 1 + modulo(j0 + jc - 2, np)
+               ja = ja + 1
+               if (ja > np) ja = 1
                do ia = i0, i1
                   du = surf%u(1, ia, ja) * xs(1) + surf%u(2, ia, ja) * xs(2) + surf%u(3, ia, ja) * xs(3)
                   perp2 = xxs - du * du
@@ -452,14 +479,16 @@ contains
                      dd = max(lower(ia, ja) - du, -1.0_wp)
                      if (dd < 0.0_wp .or. t2 - perp2 > dd * dd) then
                         lower(ia, ja) = du + sqrt(t2 - perp2)
-                        start(:, ia, ja) = [i, j]
+                        start(1, ia, ja) = i
+                        start(2, ia, ja) = j
                      end if
                   else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
-                     c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
+                     c = dot_product(surf%u(:, ia, ja), qd)
                      if (c > align(ia, ja)) then
                         align(ia, ja) = c
-                        start(:, ia, ja) = [i, j]
+                        start(1, ia, ja) = i
+                        start(2, ia, ja) = j
                      end if
                   end if
                end do
@@ -515,7 +544,7 @@ contains
       real(wp), intent(in) :: theta(:), v
       integer :: k, n
       n = size(theta)
-      k = max(1, min(n, nint(v * (n + 0.5_wp) / pi + 0.25_wp)))
+      k = int(max(1.0_wp, min(real(n, wp), v * (n + 0.5_wp) / pi + 0.75_wp)))
       do while (k > 1)
          if (theta(k - 1) < v) exit
          k = k - 1
