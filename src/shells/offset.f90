@@ -197,7 +197,8 @@ contains
       do j = 1, np
          do i = 1, nt
             if (solved(i, j)) cycle
-            call definition_radius(surf, surf%u(:, i, j), t, rt(i, j))
+            call node_frame(surf, i, j, u, e1, e2)
+            call definition_radius(surf, u, t, rt(i, j))
          end do
       end do
    end subroutine offset_grid
@@ -361,12 +362,13 @@ contains
       real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
       real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
       real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0
-      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3)
+      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm
       logical :: all_phi
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
+      lm = surf%grid%lmax
       dphi = two_pi / np
       allocate (qth(nt, np), qph(nt, np), align(nt, np), qx(nt), qy(nt), qz(nt), qn(nt), bthlo(nt), bthhi(nt), &
                 bphlo(nt), bphhi(nt))
@@ -470,8 +472,10 @@ contains
             do jc = 1, ncol
                ja = ja + 1
                if (ja > np) ja = 1
+               ! node direction (sin t cos p, sin t sin p, cos t): u . xs = sin t w + cos t xs(3)
+               w = surf%grid%trig(2, ja) * xs(1) + surf%grid%trig(lm + 2, ja) * xs(2)
                do ia = i0, i1
-                  du = surf%u(1, ia, ja) * xs(1) + surf%u(2, ia, ja) * xs(2) + surf%u(3, ia, ja) * xs(3)
+                  du = surf%grid%sphere%sint(ia) * w + surf%grid%sphere%x(ia) * xs(3)
                   perp2 = xxs - du * du
                   if (perp2 < t2) then
                      ! g_u = du + sqrt(t^2 - perp^2) > bound, decided without the square root
@@ -484,7 +488,8 @@ contains
                      end if
                   else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
-                     c = dot_product(surf%u(:, ia, ja), qd)
+                     c = surf%grid%sphere%sint(ia) * (surf%grid%trig(2, ja) * qd(1) + surf%grid%trig(lm + 2, ja) * qd(2)) &
+                         + surf%grid%sphere%x(ia) * qd(3)
                      if (c > align(ia, ja)) then
                         align(ia, ja) = c
                         start(1, ia, ja) = i

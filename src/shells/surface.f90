@@ -13,8 +13,10 @@
 !>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_sh_grid, only: sh_grid_type
+   use anm_sh_quadrature, only: new_sphere_grid
+   use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, packed_size
    implicit none
    private
 
@@ -31,7 +33,8 @@ module anm_shells_surface
       type(sh_expansion_type) :: shape
       !> e_nm = sqrt((2n+1)(n^2-m^2)/(2n-1)), packed like the Legendre table (theta derivatives).
       real(wp), allocatable :: enm(:)
-      !> Sample grid (its tables also serve the fit of the outer surface).
+      !> Sample grid with the value tables (`plm`, `trig`) to the degree of the fit of the outer
+      !> surface; the derivative tables (`dplm`, `mplm`) are not built.
       type(sh_grid_type) :: grid
       !> Surface points x(3, ntheta, nphi) at the grid directions.
       real(wp), allocatable :: x(:, :, :)
@@ -41,8 +44,6 @@ module anm_shells_surface
       real(wp), allocatable :: r(:, :)
       !> r and its derivatives at the samples, f(:, i, j) as returned by `eval_surface`.
       real(wp), allocatable :: f(:, :, :)
-      !> Unit directions of the grid nodes, u(3, ntheta, nphi).
-      real(wp), allocatable :: u(:, :, :)
       !> Largest distance between grid-adjacent samples (diagonals included).
       real(wp) :: hmax = 0.0_wp
       !> Largest sampled radius.
@@ -64,8 +65,9 @@ contains
       integer, intent(in) :: ntheta
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
+      real(wp), allocatable :: xs(:), ys(:), zs(:)
       integer :: n, m, k, i, j, nt, np, jn
-      real(wp) :: rn, rm, h, st, ct, cp, sp, rh(3), th(3), ph(3), v(3)
+      real(wp) :: rn, rm, h, st, ct, cp, sp, vx, vy, vz, vn, rps
 
       surf%shape = shape
       allocate (surf%enm(size(shape%table%ca)))
@@ -80,30 +82,39 @@ contains
       end do
       nt = ntheta
       np = 2 * ntheta
-      surf%grid = new_sh_grid(nt, np, max(lmax, shape%nmax, 2))
-      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np), surf%u(3, nt, np))
-      ! r and its derivatives, then points and normals from the same syntheses (as `sh_grid_normals`;
-      ! surf%r holds (dr/dphi) / sin(theta) until the radii are set below)
-      call grid_derivatives(surf%grid, shape, surf%f, surf%r)
+      surf%grid = value_grid(nt, np, max(lmax, shape%nmax, 2))
+      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np))
+      ! r and its derivatives, then points, outward normals r rhat - r_theta thetahat -
+      ! (r_phi / sin theta) phihat and radii, one column at a time (plain loops over the rows)
+      call grid_derivatives(surf%grid, shape, surf%f)
+      allocate (xs(nt), ys(nt), zs(nt))
       do j = 1, np
-         cp = cos(surf%grid%sphere%phi(j))
-         sp = sin(surf%grid%sphere%phi(j))
+         cp = surf%grid%trig(2, j)
+         sp = surf%grid%trig(surf%grid%lmax + 2, j)
          do i = 1, nt
             st = surf%grid%sphere%sint(i)
             ct = surf%grid%sphere%x(i)
-            rh = [st * cp, st * sp, ct]
-            th = [ct * cp, ct * sp, -st]
-            ph = [-sp, cp, 0.0_wp]
-            surf%x(:, i, j) = surf%f(1, i, j) * rh
-            v = surf%f(1, i, j) * rh - surf%f(2, i, j) * th - surf%r(i, j) * ph
-            surf%n(:, i, j) = v / norm2(v)
+            rps = surf%f(3, i, j) / st
+            xs(i) = surf%f(1, i, j) * (st * cp)
+            ys(i) = surf%f(1, i, j) * (st * sp)
+            zs(i) = surf%f(1, i, j) * ct
+            vx = xs(i) - surf%f(2, i, j) * (ct * cp) + rps * sp
+            vy = ys(i) - surf%f(2, i, j) * (ct * sp) - rps * cp
+            vz = zs(i) + surf%f(2, i, j) * st
+            vn = 1.0_wp / sqrt(vx * vx + vy * vy + vz * vz)
+            surf%x(1, i, j) = xs(i)
+            surf%x(2, i, j) = ys(i)
+            surf%x(3, i, j) = zs(i)
+            surf%n(1, i, j) = vx * vn
+            surf%n(2, i, j) = vy * vn
+            surf%n(3, i, j) = vz * vn
+            surf%r(i, j) = sqrt(xs(i) * xs(i) + ys(i) * ys(i) + zs(i) * zs(i))
          end do
       end do
       h = 0.0_wp
       do j = 1, np
          jn = 1 + mod(j, np)
          do i = 1, nt
-            surf%r(i, j) = sqrt(dot_product(surf%x(:, i, j), surf%x(:, i, j)))
             h = max(h, dist2(surf%x(:, i, j), surf%x(:, i, jn)))
             if (i < nt) then
                h = max(h, dist2(surf%x(:, i, j), surf%x(:, i + 1, j)), dist2(surf%x(:, i, j), surf%x(:, i + 1, jn)), &
@@ -119,69 +130,131 @@ contains
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
-      do j = 1, np
-         do i = 1, nt
-            surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
-         end do
-      end do
    end subroutine new_shell_surface
 
+   !> Gauss grid of ntheta x nphi nodes with the Legendre values (`plm`) and trigonometric rows
+   !> (`trig`) to degree lmax, the tables `sh_synthesize` uses for values; the derivative tables
+   !> (`dplm`, `mplm`) are not built (the derivatives come from `grid_derivatives`).
+   pure function value_grid(ntheta, nphi, lmax) result(grid)
+      integer, intent(in) :: ntheta, nphi, lmax
+      type(sh_grid_type) :: grid
+      type(legendre_table_type) :: tab
+      real(wp), allocatable :: ph(:)
+      integer :: i, j, m, k
+
+      grid%sphere = new_sphere_grid(ntheta, nphi)
+      grid%lmax = lmax
+      tab = new_legendre_table(lmax)
+      ! (the packed layout of a degree-lmax table is the grid's)
+      allocate (grid%idx(0:lmax + 1))
+      k = 1
+      do m = 0, lmax
+         grid%idx(m) = k
+         k = k + lmax - m + 1
+      end do
+      grid%idx(lmax + 1) = k
+      allocate (grid%plm(packed_size(lmax), ntheta))
+      do i = 1, ntheta
+         call legendre_values(tab, grid%sphere%x(i), grid%plm(:, i), grid%sphere%sint(i))
+      end do
+      ! cos(m phi) and sin(m phi) a row at a time (the compiler vectorises the calls)
+      allocate (grid%trig(2 * lmax + 1, nphi), ph(nphi))
+      grid%trig(1, :) = 1.0_wp
+      do m = 1, lmax
+         do j = 1, nphi
+            ph(j) = m * grid%sphere%phi(j)
+         end do
+         do j = 1, nphi
+            grid%trig(m + 1, j) = cos(ph(j))
+            grid%trig(lmax + 1 + m, j) = sin(ph(j))
+         end do
+      end do
+   end function value_grid
+
    !> r and its first and second angular derivatives at every node of `grid` (the layout of
-   !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
-   !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
-   !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
-   pure subroutine grid_derivatives(grid, shape, f, r_phi_sin)
-      !> Grid with tables.
+   !> `eval_surface`): per ring and order m, eight Legendre sums over n (of a and b weighted by
+   !> 1, n, e_{n+1,m} (shifted) and n (n + 1)) give the m-th azimuthal coefficients of r, r_theta
+   !> (dPbar_nm/dtheta = (n cos Pbar_nm - e_nm Pbar_{n-1,m}) / sin), r_phi, r_thetaphi, r_phiphi and
+   !> the Laplacian term sum n (n + 1) a_nm Y_nm; one product with the trigonometric rows per
+   !> quantity; then the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
+   pure subroutine grid_derivatives(grid, shape, f)
+      !> Grid with value tables.
       type(sh_grid_type), intent(in) :: grid
       !> Expansion.
       type(sh_expansion_type), intent(in) :: shape
       !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
       real(wp), intent(out) :: f(:, :, :)
-      !> (dr/dphi) / sin(theta) at the nodes (for the normals).
-      real(wp), intent(out) :: r_phi_sin(:, :)
-      type(sh_expansion_type) :: dphi, dphi2, lap
-      real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
-      integer :: n, m, nmax, nt, np, i
-      real(wp) :: st, ct
+      real(wp), allocatable :: c(:, :), sums(:, :), g(:, :, :), tr(:, :), w(:, :), lap(:, :)
+      integer :: n, m, l, nt, np, i, j, k0, q, lm
+      real(wp) :: rn, rm, st, ct, at, bt, en
 
-      nmax = min(shape%nmax, grid%lmax)
+      l = min(shape%nmax, grid%lmax)
+      lm = grid%lmax
       nt = grid%sphere%ntheta
       np = grid%sphere%nphi
-      allocate (a(0:nmax, 0:nmax), b(0:nmax, 0:nmax), w1(nt, np), w2(nt, np), w3(nt, np))
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = m * shape%b(n, m)
-            b(n, m) = -m * shape%a(n, m)
+      allocate (c(8, 0:l), sums(8, nt), g(nt, 2 * l + 1, 6), tr(2 * l + 1, np), w(nt, np), lap(nt, np))
+      g = 0.0_wp
+      do m = 0, l
+         rm = real(m, wp)
+         k0 = grid%idx(m)
+         c = 0.0_wp
+         do n = m, l
+            rn = real(n, wp)
+            c(1, n) = shape%a(n, m)
+            c(2, n) = shape%b(n, m)
+            c(3, n) = rn * shape%a(n, m)
+            c(4, n) = rn * shape%b(n, m)
+            if (n < l) then
+               ! e_{n+1,m} = sqrt((2n+3)((n+1)^2 - m^2)/(2n+1))
+               en = sqrt((2.0_wp * rn + 3.0_wp) * ((rn + 1.0_wp)**2 - rm * rm) / (2.0_wp * rn + 1.0_wp))
+               c(5, n) = en * shape%a(n + 1, m)
+               c(6, n) = en * shape%b(n + 1, m)
+            end if
+            c(7, n) = rn * (rn + 1.0_wp) * shape%a(n, m)
+            c(8, n) = rn * (rn + 1.0_wp) * shape%b(n, m)
+         end do
+         sums = matmul(c(:, m:l), grid%plm(k0:k0 + l - m, :))
+         do i = 1, nt
+            st = grid%sphere%sint(i)
+            ct = grid%sphere%x(i)
+            at = (ct * sums(3, i) - sums(5, i)) / st
+            bt = (ct * sums(4, i) - sums(6, i)) / st
+            g(i, m + 1, 1) = sums(1, i)
+            g(i, m + 1, 2) = at
+            g(i, m + 1, 3) = rm * sums(2, i)
+            g(i, m + 1, 4) = sums(7, i)
+            g(i, m + 1, 5) = rm * bt
+            g(i, m + 1, 6) = -rm * rm * sums(1, i)
+            if (m > 0) then
+               g(i, l + 1 + m, 1) = sums(2, i)
+               g(i, l + 1 + m, 2) = bt
+               g(i, l + 1 + m, 3) = -rm * sums(1, i)
+               g(i, l + 1 + m, 4) = sums(8, i)
+               g(i, l + 1 + m, 5) = -rm * at
+               g(i, l + 1 + m, 6) = -rm * rm * sums(2, i)
+            end if
+         end do
+         tr(m + 1, :) = grid%trig(m + 1, :)
+         if (m > 0) tr(l + 1 + m, :) = grid%trig(lm + 1 + m, :)
+      end do
+      do q = 1, 6
+         if (q == 4) then
+            lap = matmul(g(:, :, q), tr)
+            cycle
+         end if
+         w = matmul(g(:, :, q), tr)
+         do j = 1, np
+            do i = 1, nt
+               f(q, i, j) = w(i, j)
+            end do
          end do
       end do
-      call new_sh_expansion_real(dphi, a, b)
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = -real(m * m, wp) * shape%a(n, m)
-            b(n, m) = -real(m * m, wp) * shape%b(n, m)
+      do j = 1, np
+         do i = 1, nt
+            st = grid%sphere%sint(i)
+            ct = grid%sphere%x(i)
+            f(4, i, j) = -ct / st * f(2, i, j) - lap(i, j) - f(6, i, j) / (st * st)
          end do
-      end do
-      call new_sh_expansion_real(dphi2, a, b)
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = real(n * (n + 1), wp) * shape%a(n, m)
-            b(n, m) = real(n * (n + 1), wp) * shape%b(n, m)
-         end do
-      end do
-      call new_sh_expansion_real(lap, a, b)
-      call sh_synthesize(grid, shape, w1, w2, r_phi_sin, nused=nmax)
-      f(1, :, :) = w1
-      f(2, :, :) = w2
-      call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
-      f(3, :, :) = w1
-      f(5, :, :) = w2
-      call sh_synthesize(grid, dphi2, w1, nused=nmax)
-      f(6, :, :) = w1
-      call sh_synthesize(grid, lap, w3, nused=nmax)
-      do i = 1, nt
-         st = grid%sphere%sint(i)
-         ct = grid%sphere%x(i)
-         f(4, i, :) = -ct / st * f(2, i, :) - w3(i, :) - f(6, i, :) / (st * st)
       end do
    end subroutine grid_derivatives
 
