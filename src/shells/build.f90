@@ -373,9 +373,9 @@ contains
       do while (lift .and. worst > inside_tol * t .and. report%lifts < max_lifts)
          ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
-         ! sums over the violating nodes only when they are few (cost per node ~ order^2 against
-         ! ~ 2 nphi order per grid row for the dense transform)
-         if (count(deficit > 0.0_wp) * (best + 1) < 2 * size(rt)) then
+         ! sums over the violating nodes only when they are few (cost per node ~ 2 order against
+         ! ~ 2 nphi order per grid row for the dense transform, which runs as a matrix product)
+         if (4 * count(deficit > 0.0_wp) < size(rt)) then
             call sparse_analyze(surf, deficit, best, da, db)
          else
             call grid_analyze(surf, deficit, best, da, db)
@@ -434,37 +434,39 @@ contains
       end do
    end subroutine grid_analyze
 
-   !> `grid_analyze` of a function that vanishes at most nodes (the deficit of a lift): the
-   !> quadrature sums run over the nonzero nodes only.
+   !> `grid_analyze` of a function that vanishes at most nodes (the deficit of a lift): per ring,
+   !> the azimuthal sums over its nonzero nodes only, then the Legendre sums for the rings that
+   !> have any.
    pure subroutine sparse_analyze(surf, f, nmax, a, b)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: f(:, :)
       integer, intent(in) :: nmax
       real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp) :: wf, c, sn
-      integer :: i, j, m, n, k0, lm
+      real(wp) :: cs(0:nmax), ss(0:nmax), wf
+      integer :: i, j, m, k0, lm
+      logical :: nonzero
 
       a = 0.0_wp
       b = 0.0_wp
       lm = surf%grid%lmax
-      do j = 1, size(f, 2)
-         do i = 1, size(f, 1)
+      do i = 1, size(f, 1)
+         cs = 0.0_wp
+         ss = 0.0_wp
+         nonzero = .false.
+         do j = 1, size(f, 2)
             if (f(i, j) == 0.0_wp) cycle
-            wf = f(i, j) * surf%grid%sphere%weight(i)
-            do m = 0, nmax
-               k0 = surf%grid%idx(m)
-               if (m == 0) then
-                  c = wf
-                  sn = 0.0_wp
-               else
-                  c = 2.0_wp * wf * surf%grid%trig(m + 1, j)
-                  sn = 2.0_wp * wf * surf%grid%trig(lm + 1 + m, j)
-               end if
-               do n = m, nmax
-                  a(n, m) = a(n, m) + c * surf%grid%plm(k0 + n - m, i)
-                  b(n, m) = b(n, m) + sn * surf%grid%plm(k0 + n - m, i)
-               end do
-            end do
+            nonzero = .true.
+            wf = 2.0_wp * f(i, j) * surf%grid%sphere%weight(i)
+            cs = cs + wf * surf%grid%trig(1:nmax + 1, j)
+            ss(1:nmax) = ss(1:nmax) + wf * surf%grid%trig(lm + 2:lm + 1 + nmax, j)
+         end do
+         if (.not. nonzero) cycle
+         ! (order 0 carries the weight once)
+         cs(0) = 0.5_wp * cs(0)
+         do m = 0, nmax
+            k0 = surf%grid%idx(m)
+            a(m:nmax, m) = a(m:nmax, m) + cs(m) * surf%grid%plm(k0:k0 + nmax - m, i)
+            if (m > 0) b(m:nmax, m) = b(m:nmax, m) + ss(m) * surf%grid%plm(k0:k0 + nmax - m, i)
          end do
       end do
    end subroutine sparse_analyze
