@@ -218,8 +218,8 @@ contains
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
       real(wp) :: ts(pool), ps(pool), f(6, pool), sc(4, pool)
-      integer :: dir(pool), steps(pool)
-      real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
+      integer :: di(pool), dj(pool), steps(pool)
+      real(wp) :: lxf(step_lanes, 3), lnode(step_lanes, 4)
       real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
       real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
       integer :: lstate(step_lanes)
@@ -243,7 +243,8 @@ contains
             j = 1 + (k - 1) / nt
             is = start(1, i, j)
             js = start(2, i, j)
-            dir(na) = k
+            di(na) = i
+            dj(na) = j
             steps(na) = 0
             ts(na) = surf%grid%sphere%theta(is)
             ps(na) = surf%grid%sphere%phi(js)
@@ -259,26 +260,25 @@ contains
             do l = 1, step_lanes
                ! short groups repeat their first direction (results discarded)
                c = b0 + merge(l, 1, l <= nl) - 1
-               k = dir(c)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
-               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
+               i = di(c)
+               j = dj(c)
+               lnode(l, :) = [surf%grid%sphere%sint(i), surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(lm + 2, j)]
                lrn(l) = surf%r(i, j)
                lf(l, :) = f(:, c)
                lsc(l, :) = sc(:, c)
                lts(l) = ts(c)
                lps(l) = ps(c)
             end do
-            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+            call newton_lanes(lnode, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
             do l = 1, nl
                c = b0 + l - 1
-               k = dir(c)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
+               i = di(c)
+               j = dj(c)
                if (lstate(l) == newton_state%running .and. steps(c) + 1 < max_newton) then
                   ! (nkeep <= c: the slot moves down or stays)
                   nkeep = nkeep + 1
-                  dir(nkeep) = k
+                  di(nkeep) = i
+                  dj(nkeep) = j
                   steps(nkeep) = steps(c) + 1
                   ts(nkeep) = lts(l)
                   ps(nkeep) = lps(l)
@@ -361,10 +361,11 @@ contains
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
       real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
+      integer, allocatable :: rows(:)
       real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
       real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
       integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm
-      logical :: all_phi
+      logical :: all_phi, have_qd
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
@@ -396,6 +397,7 @@ contains
          end do
          pole_dir(:, kc) = pole / norm2(pole)
       end do
+      rows = row_table(surf%grid%sphere%theta)
       lower = -huge(1.0_wp)
       align = -2.0_wp
       mth = 0.25_wp * pi / nt
@@ -445,18 +447,19 @@ contains
                   call widen(d, atan2(pole(2), pole(1)), ph0, thlo, thhi, phlo, phhi)
                end if
             end if
+            ! the sample's offset direction, normalised when first needed
             q = surf%x(:, i, j) + t * surf%n(:, i, j)
-            qd = q / sqrt(dot_product(q, q))
+            have_qd = .false.
             all_phi = phhi - phlo > pi
             if (all_phi) then
                ! the patch holds a pole
-               if (qd(3) > 0.0_wp) then
+               if (q(3) > 0.0_wp) then
                   thlo = 0.0_wp
                else
                   thhi = pi
                end if
             end if
-            call row_range(surf%grid%sphere%theta, thlo - mth, thhi + mth, i0, i1)
+            call row_range(surf%grid%sphere%theta, rows, thlo - mth, thhi + mth, i0, i1)
             if (all_phi) then
                j0 = 1
                ncol = np
@@ -488,6 +491,10 @@ contains
                      end if
                   else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
+                     if (.not. have_qd) then
+                        qd = q / sqrt(dot_product(q, q))
+                        have_qd = .true.
+                     end if
                      c = surf%grid%sphere%sint(ia) * (surf%grid%trig(2, ja) * qd(1) + surf%grid%trig(lm + 2, ja) * qd(2)) &
                          + surf%grid%sphere%x(ia) * qd(3)
                      if (c > align(ia, ja)) then
@@ -520,16 +527,47 @@ contains
       phhi = max(phhi, d)
    end subroutine widen
 
-   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i); i1 < i0 when none.
-   pure subroutine row_range(theta, lo, hi, i0, i1)
+   !> Table for `row_range`: rows(b) = the first row with theta >= b pi / nb, b = 0..nb - 1, nb the
+   !> smallest power-of-two multiple of the row count for which no bin holds two rows (an empty
+   !> table when theta does not increase: `row_range` then scans).
+   pure function row_table(theta) result(rows)
+      real(wp), intent(in) :: theta(:)
+      integer, allocatable :: rows(:)
+      integer :: n, nb, b, k
+
+      n = size(theta)
+      allocate (rows(0))
+      if (n < 2) return
+      if (any(theta(2:n) <= theta(1:n - 1))) return
+      nb = 4 * n
+      do while (nb < 1024 * n)
+         if (all(theta(2:n) - theta(1:n - 1) > pi / nb)) exit
+         nb = 2 * nb
+      end do
+      deallocate (rows)
+      allocate (rows(0:nb - 1))
+      k = 1
+      do b = 0, nb - 1
+         do while (k <= n)
+            if (theta(k) >= b * (pi / nb)) exit
+            k = k + 1
+         end do
+         rows(b) = k
+      end do
+   end function row_table
+
+   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i, `rows` from `row_table`);
+   !> i1 < i0 when none.
+   pure subroutine row_range(theta, rows, lo, hi, i0, i1)
       real(wp), intent(in) :: theta(:), lo, hi
+      integer, intent(in) :: rows(0:)
       integer, intent(out) :: i0, i1
       integer :: i
       i0 = size(theta) + 1
       i1 = 0
-      if (theta(1) <= theta(size(theta))) then
-         i0 = first_at_least(theta, lo)
-         i1 = first_at_least(theta, hi) - 1
+      if (size(rows) > 0) then
+         i0 = first_at_least(theta, rows, lo)
+         i1 = first_at_least(theta, rows, hi) - 1
          if (i1 < size(theta)) then
             if (theta(i1 + 1) <= hi) i1 = i1 + 1
          end if
@@ -543,13 +581,15 @@ contains
       end if
    end subroutine row_range
 
-   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): a guess from the
-   !> asymptotic Gauss-Legendre nodes, theta_i ~ pi (i - 1/4) / (n + 1/2), corrected by a walk.
-   pure function first_at_least(theta, v) result(k)
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): the table's row for
+   !> the bin of v, corrected by a walk (at most one row holds in a bin).
+   pure function first_at_least(theta, rows, v) result(k)
       real(wp), intent(in) :: theta(:), v
-      integer :: k, n
+      integer, intent(in) :: rows(0:)
+      integer :: k, n, nb
       n = size(theta)
-      k = int(max(1.0_wp, min(real(n, wp), v * (n + 0.5_wp) / pi + 0.75_wp)))
+      nb = size(rows)
+      k = rows(int(max(0.0_wp, min(real(nb - 1, wp), v * (nb / pi)))))
       do while (k > 1)
          if (theta(k - 1) < v) exit
          k = k - 1
@@ -657,17 +697,29 @@ contains
 
    !> `newton_update` for `step_lanes` directions at once (one direction per lane; arrays
    !> (lane, component), branches as masks), the same arithmetic and the same outcomes.
-   pure subroutine newton_lanes(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
-      real(wp), intent(in) :: u(step_lanes, 3), e1(step_lanes, 3), e2(step_lanes, 3), t, rnode(step_lanes)
+   pure subroutine newton_lanes(node, t, rnode, f, sc, ts, ps, state, rho, xf)
+      real(wp), intent(in) :: node(step_lanes, 4), t, rnode(step_lanes)
       real(wp), intent(in) :: f(step_lanes, 6), sc(step_lanes, 4)
       real(wp), intent(inout) :: ts(step_lanes), ps(step_lanes)
       integer, intent(out) :: state(step_lanes)
       real(wp), intent(out) :: rho(step_lanes), xf(step_lanes, 3)
-      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2
+      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2, u, e1, e2
       real(wp), dimension(step_lanes) :: st, ct, sp, cp, sgn, nn, inn, dnt, dnp, f1, f2, j11, j12, j21, j22, det, &
-                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1
+                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1, sts
       logical, dimension(step_lanes) :: good, finish, ok
       integer :: c
+
+      ! the node's direction u and the perpendicular unit vectors theta-hat, phi-hat (`node_frame`)
+      ! from node(:, :) = [sin theta, cos theta, cos phi, sin phi] of the node
+      u(:, 1) = node(:, 1) * node(:, 3)
+      u(:, 2) = node(:, 1) * node(:, 4)
+      u(:, 3) = node(:, 2)
+      e1(:, 1) = node(:, 2) * node(:, 3)
+      e1(:, 2) = node(:, 2) * node(:, 4)
+      e1(:, 3) = -node(:, 1)
+      e2(:, 1) = -node(:, 4)
+      e2(:, 2) = node(:, 3)
+      e2(:, 3) = 0.0_wp
 
       st = sc(:, 1)
       ct = sc(:, 2)
@@ -759,8 +811,10 @@ contains
       end where
       state = newton_state%failed
       where (ok .and. rho > rnode) state = newton_state%converged
+      ! (sin of every lane, unconditionally: one vector call)
+      sts = abs(sin(ts))
       where (good .and. .not. finish)
-         state = merge(newton_state%running, newton_state%failed, abs(sin(ts)) >= pole_sin)
+         state = merge(newton_state%running, newton_state%failed, sts >= pole_sin)
       end where
    end subroutine newton_lanes
 
