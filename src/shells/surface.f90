@@ -25,7 +25,7 @@ module anm_shells_surface
    integer, parameter :: lanes = 32
 
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
-      & surface_frame_trig, surface_distance, closest_point, cross3
+      & surface_frame_trig, surface_distance, closest_point, cross3, grid_synthesis, grid_analysis
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -184,15 +184,14 @@ contains
       type(sh_expansion_type), intent(in) :: shape
       !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
       real(wp), intent(out) :: f(:, :, :)
-      real(wp), allocatable :: c(:, :), sums(:, :), g(:, :, :), tr(:, :), w(:, :), lap(:, :)
-      integer :: n, m, l, nt, np, i, j, k0, q, lm
+      real(wp), allocatable :: c(:, :), sums(:, :), g(:, :, :), w(:, :), lap(:, :)
+      integer :: n, m, l, nt, np, i, j, k0, q
       real(wp) :: rn, rm, st, ct, at, bt, en
 
       l = min(shape%nmax, grid%lmax)
-      lm = grid%lmax
       nt = grid%sphere%ntheta
       np = grid%sphere%nphi
-      allocate (c(8, 0:l), sums(8, nt), g(nt, 2 * l + 1, 6), tr(2 * l + 1, np), w(nt, np), lap(nt, np))
+      allocate (c(8, 0:l), sums(8, nt), g(nt, 2 * l + 1, 6), w(nt, np), lap(nt, np))
       g = 0.0_wp
       do m = 0, l
          rm = real(m, wp)
@@ -213,7 +212,12 @@ contains
             c(7, n) = rn * (rn + 1.0_wp) * shape%a(n, m)
             c(8, n) = rn * (rn + 1.0_wp) * shape%b(n, m)
          end do
-         sums = matmul(c(:, m:l), grid%plm(k0:k0 + l - m, :))
+         do i = 1, nt
+            sums(:, i) = 0.0_wp
+            do n = m, l
+               sums(:, i) = sums(:, i) + c(:, n) * grid%plm(k0 + n - m, i)
+            end do
+         end do
          do i = 1, nt
             st = grid%sphere%sint(i)
             ct = grid%sphere%x(i)
@@ -234,15 +238,13 @@ contains
                g(i, l + 1 + m, 6) = -rm * rm * sums(2, i)
             end if
          end do
-         tr(m + 1, :) = grid%trig(m + 1, :)
-         if (m > 0) tr(l + 1 + m, :) = grid%trig(lm + 1 + m, :)
       end do
       do q = 1, 6
          if (q == 4) then
-            lap = matmul(g(:, :, q), tr)
+            call azimuthal_sum(grid, g(:, :, q), l, lap)
             cycle
          end if
-         w = matmul(g(:, :, q), tr)
+         call azimuthal_sum(grid, g(:, :, q), l, w)
          do j = 1, np
             do i = 1, nt
                f(q, i, j) = w(i, j)
@@ -257,6 +259,100 @@ contains
          end do
       end do
    end subroutine grid_derivatives
+
+   !> out(i, j) = sum_m g(i, m + 1) cos(m phi_j) + sum_{m >= 1} g(i, l + 1 + m) sin(m phi_j), m <= l
+   !> (the azimuthal stage of a synthesis; a column at a time, the grid's trigonometric rows).
+   pure subroutine azimuthal_sum(grid, g, l, out)
+      !> Grid with trigonometric rows to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Per ring the cosine (columns 1..l + 1) and sine (l + 2..2 l + 1) coefficients.
+      real(wp), intent(in) :: g(:, :)
+      !> Highest order.
+      integer, intent(in) :: l
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(out) :: out(:, :)
+      integer :: j, m, lm
+
+      lm = grid%lmax
+      do j = 1, size(out, 2)
+         out(:, j) = g(:, 1)
+         do m = 1, l
+            out(:, j) = out(:, j) + g(:, m + 1) * grid%trig(m + 1, j) + g(:, l + 1 + m) * grid%trig(lm + 1 + m, j)
+         end do
+      end do
+   end subroutine azimuthal_sum
+
+   !> Values on the grid of sum over n <= l of (a_nm cos m phi + b_nm sin m phi) Pbar_nm(cos theta)
+   !> (b(:, 0) is not used): per ring and order the Legendre sums, then `azimuthal_sum`.
+   pure subroutine grid_synthesis(grid, a, b, l, out)
+      !> Grid with value tables to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Cosine and sine coefficients, (0:>=l, 0:>=l).
+      real(wp), intent(in) :: a(0:, 0:), b(0:, 0:)
+      !> Highest degree.
+      integer, intent(in) :: l
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(out) :: out(:, :)
+      real(wp), allocatable :: g(:, :)
+      real(wp) :: sa, sb
+      integer :: i, m, n, k0
+
+      allocate (g(grid%sphere%ntheta, 2 * l + 1))
+      do m = 0, l
+         k0 = grid%idx(m)
+         do i = 1, grid%sphere%ntheta
+            sa = 0.0_wp
+            sb = 0.0_wp
+            do n = m, l
+               sa = sa + a(n, m) * grid%plm(k0 + n - m, i)
+               sb = sb + b(n, m) * grid%plm(k0 + n - m, i)
+            end do
+            g(i, m + 1) = sa
+            if (m > 0) g(i, l + 1 + m) = sb
+         end do
+      end do
+      call azimuthal_sum(grid, g, l, out)
+   end subroutine grid_synthesis
+
+   !> Real SH coefficients of degree <= l of grid values f by Gauss quadrature (the inverse of
+   !> `grid_synthesis` for band-limited f): per ring the azimuthal sums (a column of f at a time),
+   !> then per order the Legendre sums.
+   pure subroutine grid_analysis(grid, f, l, a, b)
+      !> Grid with value tables to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(in) :: f(:, :)
+      !> Highest degree.
+      integer, intent(in) :: l
+      !> Cosine and sine coefficients (0:l, 0:l), zero outside n >= m (and b(:, 0)).
+      real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
+      real(wp), allocatable :: fc(:, :), fs(:, :)
+      real(wp) :: wf
+      integer :: i, j, m, k0, lm, nt
+
+      lm = grid%lmax
+      nt = grid%sphere%ntheta
+      allocate (fc(nt, 0:l), fs(nt, 0:l))
+      fc = 0.0_wp
+      fs = 0.0_wp
+      do j = 1, size(f, 2)
+         fc(:, 0) = fc(:, 0) + f(:, j)
+         do m = 1, l
+            fc(:, m) = fc(:, m) + f(:, j) * grid%trig(m + 1, j)
+            fs(:, m) = fs(:, m) + f(:, j) * grid%trig(lm + 1 + m, j)
+         end do
+      end do
+      a = 0.0_wp
+      b = 0.0_wp
+      do m = 0, l
+         k0 = grid%idx(m)
+         wf = merge(1.0_wp, 2.0_wp, m == 0)
+         do i = 1, nt
+            a(m:l, m) = a(m:l, m) + (wf * grid%sphere%weight(i) * fc(i, m)) * grid%plm(k0:k0 + l - m, i)
+            if (m > 0) b(m:l, m) = b(m:l, m) + (wf * grid%sphere%weight(i) * fs(i, m)) * grid%plm(k0:k0 + l - m, i)
+         end do
+      end do
+   end subroutine grid_analysis
 
    !> Squared distance between two points.
    pure function dist2(a, b) result(d)
