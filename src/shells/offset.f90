@@ -21,7 +21,7 @@
 module anm_shells_offset
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_frame_trig, &
-      & surface_distance, cross3
+      & surface_distance, cross3, node_geometry, column_geometry
    implicit none
    private
 
@@ -137,9 +137,10 @@ contains
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
-      allocate (lower(nt, np), start(2, nt, np), foot(2, nt, np), fx(3, nt, np), solved(nt, np), &
-                from_nb(nt, np), changed(nt, np), dirty(nt, np))
+      allocate (lower(nt, np), start(2, nt, np))
       call sampled_starts(surf, t, lower, start)
+      ! (allocated after the sampled bounds, whose working arrays they may reuse)
+      allocate (foot(2, nt, np), fx(3, nt, np), solved(nt, np), from_nb(nt, np), changed(nt, np), dirty(nt, np))
       tol = bound_tol * (surf%rmax + t)
       jump2 = (jump_factor * surf%hmax)**2
       from_nb = .false.
@@ -361,6 +362,7 @@ contains
       integer, intent(out) :: start(:, :, :)
       real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
       real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
+      real(wp), allocatable :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
       integer, allocatable :: rows(:)
       real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
       real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
@@ -372,30 +374,30 @@ contains
       lm = surf%grid%lmax
       dphi = two_pi / np
       allocate (qth(nt, np), qph(nt, np), align(nt, np), qx(nt), qy(nt), qz(nt), qn(nt), bthlo(nt), bthhi(nt), &
-                bphlo(nt), bphhi(nt))
-      ! offset directions (x + t n) / |x + t n| of the samples, their polar angles and azimuths
-      ! (one column at a time in plain loops: the compiler vectorises acos and atan2)
+                bphlo(nt), bphhi(nt), px(nt), py(nt), pz(nt), nx(nt), ny(nt), nz(nt))
+      ! offset points x + t n of the samples (and their sums over the first and last rings, towards
+      ! the poles), the polar angles and azimuths of their directions (one column at a time in
+      ! plain loops: the compiler vectorises acos and atan2)
+      pole_dir = 0.0_wp
       do j = 1, np
+         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
          do i = 1, nt
-            qx(i) = surf%x(1, i, j) + t * surf%n(1, i, j)
-            qy(i) = surf%x(2, i, j) + t * surf%n(2, i, j)
-            qz(i) = surf%x(3, i, j) + t * surf%n(3, i, j)
+            qx(i) = px(i) + t * nx(i)
+            qy(i) = py(i) + t * ny(i)
+            qz(i) = pz(i) + t * nz(i)
             qn(i) = sqrt(qx(i) * qx(i) + qy(i) * qy(i) + qz(i) * qz(i))
          end do
          do i = 1, nt
             qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qz(i) / qn(i))))
             qph(i, j) = atan2(qy(i) / qn(i), qx(i) / qn(i))
          end do
+         pole_dir(:, 1) = pole_dir(:, 1) + [qx(1), qy(1), qz(1)]
+         pole_dir(:, 2) = pole_dir(:, 2) + [qx(nt), qy(nt), qz(nt)]
          start(1, :, j) = [(i, i = 1, nt)]
          start(2, :, j) = j
       end do
       do kc = 1, 2
-         ii = merge(1, nt, kc == 1)
-         pole = 0.0_wp
-         do j = 1, np
-            pole = pole + surf%x(:, ii, j) + t * surf%n(:, ii, j)
-         end do
-         pole_dir(:, kc) = pole / norm2(pole)
+         pole_dir(:, kc) = pole_dir(:, kc) / norm2(pole_dir(:, kc))
       end do
       rows = row_table(surf%grid%sphere%theta)
       lower = -huge(1.0_wp)
@@ -404,6 +406,7 @@ contains
       mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
+         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
          ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
          ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1
          ! (azimuths relative to the sample's own, unwrapped), and across a pole the pole's offset
@@ -448,7 +451,8 @@ contains
                end if
             end if
             ! the sample's offset direction, normalised when first needed
-            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            xs = [px(i), py(i), pz(i)]
+            q = xs + t * [nx(i), ny(i), nz(i)]
             have_qd = .false.
             all_phi = phhi - phlo > pi
             if (all_phi) then
@@ -469,7 +473,6 @@ contains
                j0 = ceiling(phlo / dphi) + 1
                ncol = floor(phhi / dphi) + 2 - j0
             end if
-            xs = surf%x(:, i, j)
             xxs = dot_product(xs, xs)
             ja = 1 + modulo(j0 - 2, np)
             do jc = 1, ncol
@@ -847,7 +850,7 @@ contains
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: u(3), t
       real(wp), intent(out) :: ts, ps
-      real(wp) :: q(3), c, best, alpha, tu, pu, width, dphi
+      real(wp) :: q(3), c, best, alpha, tu, pu, width, dphi, xs(3), ns(3)
       integer :: i, j, jj, ib, jb, nt, np, j0, ncol
       logical :: all_phi
 
@@ -877,7 +880,8 @@ contains
          j = 1 + modulo(j0 + jj - 2, np)
          do i = 1, nt
             if (abs(surf%grid%sphere%theta(i) - tu) > alpha) cycle
-            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            call node_geometry(surf, i, j, xs, ns)
+            q = xs + t * ns
             c = dot_product(q, u) / norm2(q)
             if (c > best) then
                best = c

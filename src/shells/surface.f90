@@ -25,7 +25,8 @@ module anm_shells_surface
    integer, parameter :: lanes = 32
 
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
-      & surface_frame_trig, surface_distance, closest_point, cross3, grid_synthesis, grid_analysis
+      & surface_frame_trig, surface_distance, closest_point, cross3, grid_synthesis, grid_analysis, &
+      & node_geometry, column_geometry
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -36,11 +37,8 @@ module anm_shells_surface
       !> Sample grid with the value tables (`plm`, `trig`) to the degree of the fit of the outer
       !> surface; the derivative tables (`dplm`, `mplm`) are not built.
       type(sh_grid_type) :: grid
-      !> Surface points x(3, ntheta, nphi) at the grid directions.
-      real(wp), allocatable :: x(:, :, :)
-      !> Outward unit normals at the samples.
-      real(wp), allocatable :: n(:, :, :)
-      !> Radii at the samples.
+      !> Radii at the samples (the surface points and outward normals at the samples follow from
+      !> f and the grid: `node_geometry`, `column_geometry`).
       real(wp), allocatable :: r(:, :)
       !> r and its derivatives at the samples, f(:, i, j) as returned by `eval_surface`.
       real(wp), allocatable :: f(:, :, :)
@@ -65,9 +63,9 @@ contains
       integer, intent(in) :: ntheta
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
-      real(wp), allocatable :: xs(:), ys(:), zs(:)
-      integer :: n, m, k, i, j, nt, np, jn
-      real(wp) :: rn, rm, h, st, ct, cp, sp, vx, vy, vz, vn, rps
+      real(wp), allocatable :: px(:, :), py(:, :), pz(:, :), nx(:), ny(:), nz(:), cap(:, :, :)
+      integer :: n, m, k, i, j, nt, np, c, cn, c1
+      real(wp) :: rn, rm, h
 
       surf%shape = shape
       allocate (surf%enm(size(shape%table%ca)))
@@ -82,62 +80,109 @@ contains
       end do
       nt = ntheta
       np = 2 * ntheta
-      surf%grid = value_grid(nt, np, max(lmax, shape%nmax, 2))
-      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np))
-      ! r and its derivatives, then points, outward normals r rhat - r_theta thetahat -
-      ! (r_phi / sin theta) phihat and radii, one column at a time (plain loops over the rows)
+      call new_value_grid(surf%grid, nt, np, max(lmax, shape%nmax, 2))
+      allocate (surf%r(nt, np), surf%f(6, nt, np))
       call grid_derivatives(surf%grid, shape, surf%f)
-      allocate (xs(nt), ys(nt), zs(nt))
-      do j = 1, np
-         cp = surf%grid%trig(2, j)
-         sp = surf%grid%trig(surf%grid%lmax + 2, j)
-         do i = 1, nt
-            st = surf%grid%sphere%sint(i)
-            ct = surf%grid%sphere%x(i)
-            rps = surf%f(3, i, j) / st
-            xs(i) = surf%f(1, i, j) * (st * cp)
-            ys(i) = surf%f(1, i, j) * (st * sp)
-            zs(i) = surf%f(1, i, j) * ct
-            vx = xs(i) - surf%f(2, i, j) * (ct * cp) + rps * sp
-            vy = ys(i) - surf%f(2, i, j) * (ct * sp) - rps * cp
-            vz = zs(i) + surf%f(2, i, j) * st
-            vn = 1.0_wp / sqrt(vx * vx + vy * vy + vz * vz)
-            surf%x(1, i, j) = xs(i)
-            surf%x(2, i, j) = ys(i)
-            surf%x(3, i, j) = zs(i)
-            surf%n(1, i, j) = vx * vn
-            surf%n(2, i, j) = vy * vn
-            surf%n(3, i, j) = vz * vn
-            surf%r(i, j) = sqrt(xs(i) * xs(i) + ys(i) * ys(i) + zs(i) * zs(i))
-         end do
-      end do
+      ! radii and the largest distance between grid-adjacent samples (diagonals included), with
+      ! the points of the current, previous and first columns
+      allocate (px(nt, 3), py(nt, 3), pz(nt, 3), nx(nt), ny(nt), nz(nt), cap(3, 2, np))
       h = 0.0_wp
       do j = 1, np
-         jn = 1 + mod(j, np)
-         do i = 1, nt
-            h = max(h, dist2(surf%x(:, i, j), surf%x(:, i, jn)))
-            if (i < nt) then
-               h = max(h, dist2(surf%x(:, i, j), surf%x(:, i + 1, j)), dist2(surf%x(:, i, j), surf%x(:, i + 1, jn)), &
-                       dist2(surf%x(:, i, jn), surf%x(:, i + 1, j)))
-            end if
-         end do
+         c = merge(1, 2 + mod(j, 2), j == 1)
+         call column_geometry(surf, j, px(:, c), py(:, c), pz(:, c), nx, ny, nz)
+         surf%r(:, j) = sqrt(px(:, c)**2 + py(:, c)**2 + pz(:, c)**2)
+         cap(:, 1, j) = [px(1, c), py(1, c), pz(1, c)]
+         cap(:, 2, j) = [px(nt, c), py(nt, c), pz(nt, c)]
+         if (j > 1) then
+            ! pairs of column j - 1 (c1) and column j (cn)
+            c1 = merge(1, 2 + mod(j - 1, 2), j == 2)
+            call column_pairs(px(:, c1), py(:, c1), pz(:, c1), px(:, c), py(:, c), pz(:, c), h)
+         end if
       end do
+      ! the last column with the first
+      call column_pairs(px(:, c), py(:, c), pz(:, c), px(:, 1), py(:, 1), pz(:, 1), h)
       ! the polar caps: samples of the first and last rings are joined across the pole
       do j = 1, np / 2
-         h = max(h, dist2(surf%x(:, 1, j), surf%x(:, 1, j + np / 2)), dist2(surf%x(:, nt, j), surf%x(:, nt, j + np / 2)))
+         h = max(h, dist2(cap(:, 1, j), cap(:, 1, j + np / 2)), dist2(cap(:, 2, j), cap(:, 2, j + np / 2)))
       end do
       h = sqrt(h)
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
+   contains
+      !> h = max(h, squared distances between grid-adjacent samples of columns a and b, b after a).
+      pure subroutine column_pairs(ax, ay, az, bx, by, bz, h)
+         real(wp), intent(in) :: ax(:), ay(:), az(:), bx(:), by(:), bz(:)
+         real(wp), intent(inout) :: h
+         integer :: i, nt
+         nt = size(ax)
+         do i = 1, nt
+            h = max(h, (ax(i) - bx(i))**2 + (ay(i) - by(i))**2 + (az(i) - bz(i))**2)
+         end do
+         do i = 1, nt - 1
+            h = max(h, (ax(i) - ax(i + 1))**2 + (ay(i) - ay(i + 1))**2 + (az(i) - az(i + 1))**2, &
+                    (ax(i) - bx(i + 1))**2 + (ay(i) - by(i + 1))**2 + (az(i) - bz(i + 1))**2, &
+                    (bx(i) - ax(i + 1))**2 + (by(i) - ay(i + 1))**2 + (bz(i) - az(i + 1))**2)
+         end do
+      end subroutine column_pairs
    end subroutine new_shell_surface
+
+   !> Surface point and outward unit normal of sample (i, j) from r and its derivatives there:
+   !> x = r rhat, n ~ r rhat - r_theta thetahat - (r_phi / sin theta) phihat.
+   pure subroutine node_geometry(surf, i, j, x, n)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Node (ring, column).
+      integer, intent(in) :: i, j
+      !> Point and unit normal.
+      real(wp), intent(out) :: x(3), n(3)
+      call sample_geometry(surf%f(1, i, j), surf%f(2, i, j), surf%f(3, i, j), surf%grid%sphere%sint(i), &
+                           surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(surf%grid%lmax + 2, j), &
+                           x(1), x(2), x(3), n(1), n(2), n(3))
+   end subroutine node_geometry
+
+   !> `node_geometry` for every sample of column j (components in separate arrays of the rings).
+   pure subroutine column_geometry(surf, j, px, py, pz, nx, ny, nz)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Column.
+      integer, intent(in) :: j
+      !> Points and unit normals of the samples of the column, (ntheta) each.
+      real(wp), intent(out) :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
+      real(wp) :: cp, sp
+      integer :: i
+      cp = surf%grid%trig(2, j)
+      sp = surf%grid%trig(surf%grid%lmax + 2, j)
+      do i = 1, surf%grid%sphere%ntheta
+         call sample_geometry(surf%f(1, i, j), surf%f(2, i, j), surf%f(3, i, j), surf%grid%sphere%sint(i), &
+                              surf%grid%sphere%x(i), cp, sp, px(i), py(i), pz(i), nx(i), ny(i), nz(i))
+      end do
+   end subroutine column_geometry
+
+   !> Point and outward unit normal from r, r_theta, r_phi and the direction's sines and cosines.
+   elemental subroutine sample_geometry(r, rt, rp, st, ct, cp, sp, x1, x2, x3, n1, n2, n3)
+      real(wp), intent(in) :: r, rt, rp, st, ct, cp, sp
+      real(wp), intent(out) :: x1, x2, x3, n1, n2, n3
+      real(wp) :: rps, vx, vy, vz, vn
+      rps = rp / st
+      x1 = r * (st * cp)
+      x2 = r * (st * sp)
+      x3 = r * ct
+      vx = x1 - rt * (ct * cp) + rps * sp
+      vy = x2 - rt * (ct * sp) - rps * cp
+      vz = x3 + rt * st
+      vn = 1.0_wp / sqrt(vx * vx + vy * vy + vz * vz)
+      n1 = vx * vn
+      n2 = vy * vn
+      n3 = vz * vn
+   end subroutine sample_geometry
 
    !> Gauss grid of ntheta x nphi nodes with the Legendre values (`plm`) and trigonometric rows
    !> (`trig`) to degree lmax, the tables `sh_synthesize` uses for values; the derivative tables
    !> (`dplm`, `mplm`) are not built (the derivatives come from `grid_derivatives`).
-   pure function value_grid(ntheta, nphi, lmax) result(grid)
+   pure subroutine new_value_grid(grid, ntheta, nphi, lmax)
+      type(sh_grid_type), intent(out) :: grid
       integer, intent(in) :: ntheta, nphi, lmax
-      type(sh_grid_type) :: grid
       type(legendre_table_type) :: tab
       real(wp), allocatable :: ph(:)
       integer :: i, j, m, k
@@ -169,7 +214,7 @@ contains
             grid%trig(lmax + 1 + m, j) = sin(ph(j))
          end do
       end do
-   end function value_grid
+   end subroutine new_value_grid
 
    !> r and its first and second angular derivatives at every node of `grid` (the layout of
    !> `eval_surface`): per ring and order m, eight Legendre sums over n (of a and b weighted by
@@ -679,7 +724,7 @@ contains
       real(wp), intent(in), optional :: known(3)
       real(wp), allocatable :: w(:, :)
       integer, allocatable :: jidx(:)
-      real(wp) :: ry, ty, py, reach, alpha, dphi, dth, width, dmin, th, ph, dloc, wc
+      real(wp) :: ry, ty, py, reach, alpha, dphi, dth, width, dmin, th, ph, dloc, wc, xs(3), ns(3)
       integer :: nt, np, i0, i1, ncol, i, jj, j, a, b, ia, jb, j0
       logical :: all_phi, is_min
 
@@ -727,7 +772,8 @@ contains
          jidx(jj) = 1 + modulo(j0 - 1 + jj - 1, np)
          j = jidx(jj)
          do i = i0, i1
-            w(i, jj) = norm2(y - surf%x(:, i, j))
+            call node_geometry(surf, i, j, xs, ns)
+            w(i, jj) = norm2(y - xs)
          end do
       end do
       dmin = huge(1.0_wp)
@@ -753,7 +799,8 @@ contains
             th = surf%grid%sphere%theta(i)
             ph = surf%grid%sphere%phi(jidx(jj))
             if (present(known)) then
-               if (norm2(surf%x(:, i, jidx(jj)) - known) < 1.5_wp * surf%hmax) then
+               call node_geometry(surf, i, jidx(jj), xs, ns)
+               if (norm2(xs - known) < 1.5_wp * surf%hmax) then
                   if (wc < dmin) then
                      dmin = wc
                      theta_c = th
