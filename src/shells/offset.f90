@@ -207,10 +207,11 @@ contains
    !> Newton from every node's sampled start, each direction independently, through a pool of
    !> `pool` slots: directions enter the pool in order with the tabulated derivatives of their
    !> start sample (the first step needs no evaluation); each round takes one Newton step for every
-   !> slot (`newton_lanes`, `step_lanes` at a time), retires the finished directions and evaluates
-   !> the expansion at the new points of the others (`eval_surface_many`). The groups of lanes stay
-   !> full (only the last group of a round is short) and the working arrays are per slot (small,
-   !> on the stack) instead of per direction of the grid.
+   !> slot (`newton_lanes` on `step_lanes` consecutive slots at a time), retires the finished
+   !> directions, keeps the others in order and evaluates the expansion at their new points
+   !> (`eval_surface_many`). The groups of lanes stay full (only the last group of a round is
+   !> short) and the working arrays are per slot (lane-major, small, on the stack) instead of per
+   !> direction of the grid.
    pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t, lower(:, :), tol
@@ -218,11 +219,9 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp) :: ts(pool), ps(pool), f(6, pool), sc(4, pool)
+      real(wp) :: ts(pool), ps(pool), f(pool, 6), sc(pool, 4), node(pool, 4), rn(pool)
       integer :: di(pool), dj(pool), steps(pool)
-      real(wp) :: lxf(step_lanes, 3), lnode(step_lanes, 4)
-      real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
-      real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
+      real(wp) :: lxf(step_lanes, 3), lrho(step_lanes)
       integer :: lstate(step_lanes)
       integer :: nt, np, n, k, knext, na, nkeep, i, j, b0, is, js, lm, l, nl, c
 
@@ -232,6 +231,15 @@ contains
       lm = surf%grid%lmax
       rt = 0.0_wp
       fx = 0.0_wp
+      ! slots never filled take part in short groups: harmless values (the equator)
+      ts = 0.5_wp * pi
+      ps = 0.0_wp
+      f = 1.0_wp
+      sc = 0.0_wp
+      sc(:, 1) = 1.0_wp
+      sc(:, 4) = 1.0_wp
+      node = sc
+      rn = 1.0_wp
       knext = 1
       na = 0
       do
@@ -250,27 +258,18 @@ contains
             ts(na) = surf%grid%sphere%theta(is)
             ps(na) = surf%grid%sphere%phi(js)
             ! sin/cos of the start node from the grid's tables, derivatives from the sample's table
-            sc(:, na) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
-            f(:, na) = surf%f(:, is, js)
+            sc(na, :) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
+            f(na, :) = surf%f(:, is, js)
+            node(na, :) = [surf%grid%sphere%sint(i), surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(lm + 2, j)]
+            rn(na) = surf%r(i, j)
          end do
          if (na == 0) exit
-         ! one Newton step for every slot, `step_lanes` at a time; the running ones are kept in order
+         ! one Newton step for every slot, `step_lanes` at a time (a short last group runs on
+         ! stale or never-filled slots, results discarded); the running ones are kept in order
          nkeep = 0
          do b0 = 1, na, step_lanes
             nl = min(step_lanes, na - b0 + 1)
-            do l = 1, step_lanes
-               ! short groups repeat their first direction (results discarded)
-               c = b0 + merge(l, 1, l <= nl) - 1
-               i = di(c)
-               j = dj(c)
-               lnode(l, :) = [surf%grid%sphere%sint(i), surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(lm + 2, j)]
-               lrn(l) = surf%r(i, j)
-               lf(l, :) = f(:, c)
-               lsc(l, :) = sc(:, c)
-               lts(l) = ts(c)
-               lps(l) = ps(c)
-            end do
-            call newton_lanes(lnode, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+            call newton_lanes(pool, node(b0, 1), t, rn(b0), f(b0, 1), sc(b0, 1), ts(b0), ps(b0), lstate, lrho, lxf)
             do l = 1, nl
                c = b0 + l - 1
                i = di(c)
@@ -281,8 +280,10 @@ contains
                   di(nkeep) = i
                   dj(nkeep) = j
                   steps(nkeep) = steps(c) + 1
-                  ts(nkeep) = lts(l)
-                  ps(nkeep) = lps(l)
+                  ts(nkeep) = ts(c)
+                  ps(nkeep) = ps(c)
+                  node(nkeep, :) = node(c, :)
+                  rn(nkeep) = rn(c)
                   cycle
                end if
                ! retired: converged, failed, or still running after max_newton steps (whose
@@ -295,12 +296,12 @@ contains
                   solved(i, j) = rt(i, j) >= lower(i, j) - tol
                end if
                if (.not. solved(i, j)) rt(i, j) = 0.0_wp
-               foot(:, i, j) = [lts(l), lps(l)]
+               foot(:, i, j) = [ts(c), ps(c)]
             end do
          end do
          na = nkeep
          if (na > 0) then
-            call eval_surface_many(surf, ts(1:na), ps(1:na), f(:, 1:na), sc(:, 1:na))
+            call eval_surface_many(surf, ts(1:na), ps(1:na), f(1:na, :), sc(1:na, :))
             nev = nev + na
          end if
       end do
@@ -364,7 +365,7 @@ contains
       real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
       real(wp), allocatable :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
       integer, allocatable :: rows(:)
-      real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
+      real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi, rscale
       real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
       integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm
       logical :: all_phi, have_qd
@@ -400,6 +401,7 @@ contains
          pole_dir(:, kc) = pole_dir(:, kc) / norm2(pole_dir(:, kc))
       end do
       rows = row_table(surf%grid%sphere%theta)
+      rscale = size(rows) / pi
       lower = -huge(1.0_wp)
       align = -2.0_wp
       mth = 0.25_wp * pi / nt
@@ -463,7 +465,7 @@ contains
                   thhi = pi
                end if
             end if
-            call row_range(surf%grid%sphere%theta, rows, thlo - mth, thhi + mth, i0, i1)
+            call row_range(surf%grid%sphere%theta, rows, rscale, thlo - mth, thhi + mth, i0, i1)
             if (all_phi) then
                j0 = 1
                ncol = np
@@ -559,18 +561,18 @@ contains
       end do
    end function row_table
 
-   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i, `rows` from `row_table`);
-   !> i1 < i0 when none.
-   pure subroutine row_range(theta, rows, lo, hi, i0, i1)
-      real(wp), intent(in) :: theta(:), lo, hi
+   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i, `rows` from `row_table`,
+   !> scale = size(rows) / pi); i1 < i0 when none.
+   pure subroutine row_range(theta, rows, scale, lo, hi, i0, i1)
+      real(wp), intent(in) :: theta(:), scale, lo, hi
       integer, intent(in) :: rows(0:)
       integer, intent(out) :: i0, i1
       integer :: i
       i0 = size(theta) + 1
       i1 = 0
       if (size(rows) > 0) then
-         i0 = first_at_least(theta, rows, lo)
-         i1 = first_at_least(theta, rows, hi) - 1
+         i0 = first_at_least(theta, rows, scale, lo)
+         i1 = first_at_least(theta, rows, scale, hi) - 1
          if (i1 < size(theta)) then
             if (theta(i1 + 1) <= hi) i1 = i1 + 1
          end if
@@ -586,13 +588,13 @@ contains
 
    !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): the table's row for
    !> the bin of v, corrected by a walk (at most one row holds in a bin).
-   pure function first_at_least(theta, rows, v) result(k)
-      real(wp), intent(in) :: theta(:), v
+   pure function first_at_least(theta, rows, scale, v) result(k)
+      real(wp), intent(in) :: theta(:), scale, v
       integer, intent(in) :: rows(0:)
-      integer :: k, n, nb
+      integer :: k, n
       n = size(theta)
-      nb = size(rows)
-      k = rows(int(max(0.0_wp, min(real(nb - 1, wp), v * (nb / pi)))))
+      k = rows(int(max(0.0_wp, min(real(size(rows) - 1, wp), v * scale))))
+      ! (the walks take a step only at a row inside the bin of v, or by rounding of the bin)
       do while (k > 1)
          if (theta(k - 1) < v) exit
          k = k - 1
@@ -699,21 +701,27 @@ contains
    end subroutine newton_update
 
    !> `newton_update` for `step_lanes` directions at once (one direction per lane; arrays
-   !> (lane, component), branches as masks), the same arithmetic and the same outcomes.
-   pure subroutine newton_lanes(node, t, rnode, f, sc, ts, ps, state, rho, xf)
-      real(wp), intent(in) :: node(step_lanes, 4), t, rnode(step_lanes)
-      real(wp), intent(in) :: f(step_lanes, 6), sc(step_lanes, 4)
+   !> (lane, component), branches as masks), the same arithmetic and the same outcomes. The
+   !> lane inputs are the first `step_lanes` rows of arrays with leading dimension ld (node: the
+   !> node's sin theta, cos theta, cos phi, sin phi; f and sc as from `eval_surface_many`).
+   pure subroutine newton_lanes(ld, nodein, t, rnode, fin, scin, ts, ps, state, rho, xf)
+      integer, intent(in) :: ld
+      real(wp), intent(in) :: nodein(ld, 4), t, rnode(step_lanes)
+      real(wp), intent(in) :: fin(ld, 6), scin(ld, 4)
       real(wp), intent(inout) :: ts(step_lanes), ps(step_lanes)
       integer, intent(out) :: state(step_lanes)
       real(wp), intent(out) :: rho(step_lanes), xf(step_lanes, 3)
+      real(wp) :: node(step_lanes, 4), f(step_lanes, 6), sc(step_lanes, 4)
       real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2, u, e1, e2
       real(wp), dimension(step_lanes) :: st, ct, sp, cp, sgn, nn, inn, dnt, dnp, f1, f2, j11, j12, j21, j22, det, &
                                          dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1, sts
       logical, dimension(step_lanes) :: good, finish, ok
       integer :: c
 
+      node = nodein(1:step_lanes, :)
+      f = fin(1:step_lanes, :)
+      sc = scin(1:step_lanes, :)
       ! the node's direction u and the perpendicular unit vectors theta-hat, phi-hat (`node_frame`)
-      ! from node(:, :) = [sin theta, cos theta, cos phi, sin phi] of the node
       u(:, 1) = node(:, 1) * node(:, 3)
       u(:, 2) = node(:, 1) * node(:, 4)
       u(:, 3) = node(:, 2)

@@ -487,11 +487,11 @@ contains
       type(shell_surface_type), intent(in) :: surf
       !> Polar angles and azimuths (|sin(theta)| not tiny).
       real(wp), intent(in) :: theta(:), phi(:)
-      !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
+      !> f(k, :) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
       real(wp), intent(out) :: f(:, :)
-      !> sc(:, k) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
+      !> sc(k, :) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
       real(wp), intent(out), optional :: sc(:, :)
-      real(wp) :: th(lanes), ph(lanes), fl(6, lanes), scl(4, lanes)
+      real(wp) :: th(lanes), ph(lanes), fl(lanes, 6), scl(lanes, 4)
       integer :: k0, nk
 
       do k0 = 1, size(theta), lanes
@@ -502,8 +502,8 @@ contains
          th(1:nk) = theta(k0:k0 + nk - 1)
          ph(1:nk) = phi(k0:k0 + nk - 1)
          call eval_lanes(surf, th, ph, fl, scl)
-         f(:, k0:k0 + nk - 1) = fl(:, 1:nk)
-         if (present(sc)) sc(:, k0:k0 + nk - 1) = scl(:, 1:nk)
+         f(k0:k0 + nk - 1, :) = fl(1:nk, :)
+         if (present(sc)) sc(k0:k0 + nk - 1, :) = scl(1:nk, :)
       end do
    end subroutine eval_surface_many
 
@@ -511,7 +511,7 @@ contains
    pure subroutine eval_lanes(surf, theta, phi, f, sc)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: theta(lanes), phi(lanes)
-      real(wp), intent(out) :: f(6, lanes), sc(4, lanes)
+      real(wp), intent(out) :: f(lanes, 6), sc(lanes, 4)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
       real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
                                     a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, q
@@ -522,10 +522,10 @@ contains
       s = sin(theta)
       cp = cos(phi)
       sp = sin(phi)
-      sc(1, :) = s
-      sc(2, :) = x
-      sc(3, :) = sp
-      sc(4, :) = cp
+      sc(:, 1) = s
+      sc(:, 2) = x
+      sc(:, 3) = sp
+      sc(:, 4) = cp
       inv_s = 1.0_wp / s
       cots = x * inv_s
       nmax = surf%shape%nmax
@@ -588,12 +588,12 @@ contains
          f5 = f5 + rm * (b1 * cm - a1 * sm)
          f6 = f6 - msq * (a0 * cm + b0 * sm)
       end do
-      f(1, :) = f1
-      f(2, :) = f2
-      f(3, :) = f3
-      f(4, :) = f4
-      f(5, :) = f5
-      f(6, :) = f6
+      f(:, 1) = f1
+      f(:, 2) = f2
+      f(:, 3) = f3
+      f(:, 4) = f4
+      f(:, 5) = f5
+      f(:, 6) = f6
    end subroutine eval_lanes
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
