@@ -219,7 +219,9 @@ contains
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
       logical, intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp) :: ts(pool), ps(pool), f(pool, 6), sc(pool, 4), node(pool, 4), rn(pool)
+      ! (the columns of the lane-major arrays are padded: a power-of-two stride would map a slot's
+      ! entries to the same cache set)
+      real(wp) :: ts(pool), ps(pool), f(pool + 8, 6), sc(pool + 8, 4), node(pool + 8, 4), rn(pool)
       integer :: di(pool), dj(pool), steps(pool)
       real(wp) :: lxf(step_lanes, 3), lrho(step_lanes)
       integer :: lstate(step_lanes)
@@ -269,7 +271,7 @@ contains
          nkeep = 0
          do b0 = 1, na, step_lanes
             nl = min(step_lanes, na - b0 + 1)
-            call newton_lanes(pool, node(b0, 1), t, rn(b0), f(b0, 1), sc(b0, 1), ts(b0), ps(b0), lstate, lrho, lxf)
+            call newton_lanes(pool + 8, node(b0, 1), t, rn(b0), f(b0, 1), sc(b0, 1), ts(b0), ps(b0), lstate, lrho, lxf)
             do l = 1, nl
                c = b0 + l - 1
                i = di(c)
