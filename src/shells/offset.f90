@@ -534,9 +534,10 @@ contains
       phhi = max(phhi, d)
    end subroutine widen
 
-   !> Table for `row_range`: rows(b) = the first row with theta >= b pi / nb, b = 0..nb - 1, nb the
-   !> smallest power-of-two multiple of the row count for which no bin holds two rows (an empty
-   !> table when theta does not increase: `row_range` then scans).
+   !> Table for `row_range`: rows(b) = the first row with theta >= b pi / nb, b = 0..nb - 1, nb at
+   !> least 64 times the row count (so that few values share a bin with a row: the correction in
+   !> `first_at_least` is then rarely taken) and such that no bin holds two rows (an empty table
+   !> when theta does not increase: `row_range` then scans).
    pure function row_table(theta) result(rows)
       real(wp), intent(in) :: theta(:)
       integer, allocatable :: rows(:)
@@ -546,7 +547,7 @@ contains
       allocate (rows(0))
       if (n < 2) return
       if (any(theta(2:n) <= theta(1:n - 1))) return
-      nb = 4 * n
+      nb = 64 * n
       do while (nb < 1024 * n)
          if (all(theta(2:n) - theta(1:n - 1) > pi / nb)) exit
          nb = 2 * nb
