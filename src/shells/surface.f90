@@ -514,7 +514,7 @@ contains
       real(wp), intent(out) :: f(lanes, 6), sc(lanes, 4)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
       real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
-                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, q
+                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, t0
       real(wp) :: an, bn, ca, cb, en, rn, nn1, msq, rm
       integer :: m, n, k0, nmax
 
@@ -580,18 +580,20 @@ contains
          end do
          rm = real(m, wp)
          msq = rm * rm
-         q = msq * inv_s * inv_s
-         f1 = f1 + a0 * cm + b0 * sm
-         f2 = f2 + a1 * cm + b1 * sm
+         ! the azimuthal factors (r_thetatheta from the Legendre equation at the end)
+         t0 = a0 * cm + b0 * sm
+         f1 = f1 + t0
+         f6 = f6 - msq * t0
+         f2 = f2 + (a1 * cm + b1 * sm)
          f3 = f3 + rm * (b0 * cm - a0 * sm)
-         f4 = f4 + (-cots * a1 - ann + q * a0) * cm + (-cots * b1 - bnn + q * b0) * sm
          f5 = f5 + rm * (b1 * cm - a1 * sm)
-         f6 = f6 - msq * (a0 * cm + b0 * sm)
+         f4 = f4 + (ann * cm + bnn * sm)
       end do
+      ! Legendre equation: r_thetatheta = -cot r_theta - sum n (n + 1) r_nm - r_phiphi / sin^2
       f(:, 1) = f1
       f(:, 2) = f2
       f(:, 3) = f3
-      f(:, 4) = f4
+      f(:, 4) = -cots * f2 - f4 - f6 * (inv_s * inv_s)
       f(:, 5) = f5
       f(:, 6) = f6
    end subroutine eval_lanes
