@@ -19,6 +19,7 @@
 !>     call offset_grid(surf, t, rt, counts)               ! R_t at every node of surf%grid
 !>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
+   use, intrinsic :: iso_c_binding, only: c_bool
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_frame_trig, &
       & surface_distance, cross3, node_geometry, column_geometry
@@ -129,15 +130,16 @@ contains
       !> How the directions were solved.
       type(offset_counts_type), intent(out) :: counts
       real(wp), allocatable :: lower(:, :), foot(:, :, :), fx(:, :, :)
-      integer, allocatable :: start(:, :, :)
-      logical, allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
+      integer, allocatable :: start(:, :)
+      ! (one-byte flags and one start index per node: less fresh memory per shell)
+      logical(c_bool), allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
       real(wp) :: ts, ps, rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
       integer :: nt, np, i, j, k, ii, jj, pass, nev
       logical :: ok, any_change
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
-      allocate (lower(nt, np), start(2, nt, np))
+      allocate (lower(nt, np), start(nt, np))
       call sampled_starts(surf, t, lower, start)
       ! (allocated after the sampled bounds, whose working arrays they may reuse)
       allocate (foot(2, nt, np), fx(3, nt, np), solved(nt, np), from_nb(nt, np), changed(nt, np), dirty(nt, np))
@@ -215,9 +217,9 @@ contains
    pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t, lower(:, :), tol
-      integer, intent(in) :: start(:, :, :)
+      integer, intent(in) :: start(:, :)
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
-      logical, intent(out) :: solved(:, :)
+      logical(c_bool), intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
       ! (the columns of the lane-major arrays are padded: a power-of-two stride would map a slot's
       ! entries to the same cache set)
@@ -252,8 +254,8 @@ contains
             knext = knext + 1
             i = 1 + modulo(k - 1, nt)
             j = 1 + (k - 1) / nt
-            is = start(1, i, j)
-            js = start(2, i, j)
+            is = 1 + modulo(start(i, j) - 1, nt)
+            js = 1 + (start(i, j) - 1) / nt
             di(na) = i
             dj(na) = j
             steps(na) = 0
@@ -349,7 +351,8 @@ contains
    end subroutine neighbour
 
    !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
-   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
+   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction),
+   !> start = i + (j - 1) ntheta for sample (i, j).
    !> The samples form cells (grid-adjacent quadruples, the polar caps closed by triangles to the
    !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
    !> directions, so each cell's corners must be tried on the direction nodes inside the
@@ -362,14 +365,14 @@ contains
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t
       real(wp), intent(out) :: lower(:, :)
-      integer, intent(out) :: start(:, :, :)
+      integer, intent(out) :: start(:, :)
       real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
       real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
       real(wp), allocatable :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
       integer, allocatable :: rows(:)
       real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi, rscale
       real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
-      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm, code
       logical :: all_phi, have_qd
 
       nt = surf%grid%sphere%ntheta
@@ -396,8 +399,7 @@ contains
          end do
          pole_dir(:, 1) = pole_dir(:, 1) + [qx(1), qy(1), qz(1)]
          pole_dir(:, 2) = pole_dir(:, 2) + [qx(nt), qy(nt), qz(nt)]
-         start(1, :, j) = [(i, i = 1, nt)]
-         start(2, :, j) = j
+         start(:, j) = [(i + (j - 1) * nt, i = 1, nt)]
       end do
       do kc = 1, 2
          pole_dir(:, kc) = pole_dir(:, kc) / norm2(pole_dir(:, kc))
@@ -478,6 +480,7 @@ contains
                ncol = floor(phhi / dphi) + 2 - j0
             end if
             xxs = dot_product(xs, xs)
+            code = i + (j - 1) * nt
             ja = 1 + modulo(j0 - 2, np)
             do jc = 1, ncol
                ja = ja + 1
@@ -493,8 +496,7 @@ contains
                      dd = max(lower(ia, ja) - du, -1.0_wp)
                      if (dd < 0.0_wp .or. t2 - perp2 > dd * dd) then
                         lower(ia, ja) = du + sqrt(t2 - perp2)
-                        start(1, ia, ja) = i
-                        start(2, ia, ja) = j
+                        start(ia, ja) = code
                      end if
                   else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
@@ -506,8 +508,7 @@ contains
                          + surf%grid%sphere%x(ia) * qd(3)
                      if (c > align(ia, ja)) then
                         align(ia, ja) = c
-                        start(1, ia, ja) = i
-                        start(2, ia, ja) = j
+                        start(ia, ja) = code
                      end if
                   end if
                end do
