@@ -133,7 +133,7 @@ contains
       integer, allocatable :: start(:, :)
       ! (one-byte flags and one start index per node: less fresh memory per shell)
       logical(c_bool), allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
-      real(wp) :: ts, ps, rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
+      real(wp) :: rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
       integer :: nt, np, i, j, k, ii, jj, pass, nev
       logical :: ok, any_change
 

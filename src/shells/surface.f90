@@ -64,7 +64,7 @@ contains
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
       real(wp), allocatable :: px(:, :), py(:, :), pz(:, :), nx(:), ny(:), nz(:), cap(:, :, :)
-      integer :: n, m, k, i, j, nt, np, c, cn, c1
+      integer :: n, m, k, j, nt, np, c, c1
       real(wp) :: rn, rm, h
 
       surf%shape = shape
@@ -87,6 +87,7 @@ contains
       ! the points of the current, previous and first columns
       allocate (px(nt, 3), py(nt, 3), pz(nt, 3), nx(nt), ny(nt), nz(nt), cap(3, 2, np))
       h = 0.0_wp
+      c = 1
       do j = 1, np
          c = merge(1, 2 + mod(j, 2), j == 1)
          call column_geometry(surf, j, px(:, c), py(:, c), pz(:, c), nx, ny, nz)
@@ -94,7 +95,7 @@ contains
          cap(:, 1, j) = [px(1, c), py(1, c), pz(1, c)]
          cap(:, 2, j) = [px(nt, c), py(nt, c), pz(nt, c)]
          if (j > 1) then
-            ! pairs of column j - 1 (c1) and column j (cn)
+            ! pairs of column j - 1 (buffer c1) and column j (buffer c)
             c1 = merge(1, 2 + mod(j - 1, 2), j == 2)
             call column_pairs(px(:, c1), py(:, c1), pz(:, c1), px(:, c), py(:, c), pz(:, c), h)
          end if
