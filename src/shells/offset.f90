@@ -43,7 +43,8 @@ module anm_shells_offset
    integer, parameter :: max_newton = 30
    !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
    real(wp), parameter :: pole_sin = 1.0e-6_wp
-   !> Slots of the first Newton pass (directions in flight; its working arrays, some 110 kB).
+   !> Slots of the first Newton pass (directions in flight; its working arrays, some 150 kB on the
+   !> stack).
    integer, parameter :: pool = 1024
    !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
    integer, parameter :: step_lanes = 32

@@ -1,6 +1,7 @@
 !> Per-shape surface data for shell construction: a pointwise evaluator of r and its first and
-!> second angular derivatives, a dense sample of surface points and normals on a Gauss grid, and
-!> the distance from a point to the particle surface (the definition of a shell).
+!> second angular derivatives, a dense sample of r and its derivatives on a Gauss grid (surface
+!> points and normals follow from them), syntheses and analyses on that grid, and the distance
+!> from a point to the particle surface (the definition of a shell).
 !>
 !> The distance query uses the star shape: a surface point x within distance D of a point y
 !> (|y| > D) lies in the cone of half-angle asin(D/|y|) about y, so only the grid samples in that
@@ -11,6 +12,8 @@
 !>     call new_shell_surface(surf, shape, 120)
 !>     call surface_distance(surf, y, tcut, d, theta_c, phi_c)   ! d > tcut means "farther"
 !>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
+!>     call node_geometry(surf, i, j, x, n)                       ! sample point and normal
+!>     call grid_synthesis(surf%grid, a, b, l, values)            ! (a, b) of degree l on the grid
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type
@@ -508,7 +511,8 @@ contains
       end do
    end subroutine eval_surface_many
 
-   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`).
+   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`); the azimuthal factors
+   !> are summed once per order and r_thetatheta follows from the Legendre equation at the end.
    pure subroutine eval_lanes(surf, theta, phi, f, sc)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: theta(lanes), phi(lanes)
