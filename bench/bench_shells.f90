@@ -3,8 +3,8 @@
 !> of the particle length, with the Newton/fallback counts, the fitted order and residual, and a
 !> per-phase breakdown: the surface precomputation (`new_shell_surface`) and R_t on the grid
 !> (`offset_grid`) timed on their own (CPU ms, best of 3); the rest of a shell is the fit.
-!> Run: bash scripts/bench.sh (see docs/performance-notes.md). Argument: the shapes folder
-!> (default ../shared/shapes/MA111-7-coarse).
+!> Run: bash scripts/bench.sh (figures: docs/performance.md; analysis: docs/performance-notes.md).
+!> Argument: the shapes folder (default ../shared/shapes/MA111-7-coarse).
 program bench_shells
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
    use anm_core_kinds, only: wp, i8
