@@ -88,6 +88,15 @@ module anm_contact_body
       real(wp), allocatable :: row_ct(:), row_st(:), row_cosa(:), row_sina(:)
       !> Per patch column: cos and sin of the mid azimuth.
       real(wp), allocatable :: col_cp(:), col_sp(:)
+      !> Oriented box of the surface piece {r(u) u : u in patch} of each patch of levels
+      !> 0..leaf_level (same indexing as `dir`): centre (3, npatch), orthonormal axes as columns
+      !> (3, 3, npatch; the third is the surface normal at the patch centre) and half-extents
+      !> (3, npatch): every such point x has |e_i . (x - c)| <= h_i (certified, `surface_boxes`).
+      real(wp), allocatable :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
+      !> Radius of a ball about obb_c containing the box (|h| rounded up).
+      real(wp), allocatable :: obb_r(:)
+      !> r at the centre direction `dir` of each patch of levels 0..leaf_level (a surface point).
+      real(wp), allocatable :: rc(:)
    end type contact_body_type
 
 contains
@@ -232,7 +241,7 @@ contains
       integer, intent(in), optional :: nused
       !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
       integer, intent(in), optional :: next
-      real(wp), allocatable :: rg(:, :), gg(:, :), clo(:, :), chi(:, :)
+      real(wp), allocatable :: rg(:, :), gg(:, :), rt(:, :), rp(:, :), clo(:, :), chi(:, :), dcr(:)
       integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc, nd
       real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu, d3(3)
       real(wp) :: e(3)
@@ -251,8 +260,9 @@ contains
       npg = cells_per_leaf * nleaf_p
       dth = pi / ntg
       dph = two_pi / npg
-      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg))
-      call synthesize_regular(body%shape, ntg, npg, rg, gg)
+      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg), rt(0:ntg, 0:npg), rp(0:ntg, 0:npg))
+      call synthesize_regular(body%shape, ntg, npg, rg, rt, rp)
+      gg = sqrt(rt**2 + rp**2)
       smin = minval(rg)
       smax = maxval(rg)
       ms = 0.5_wp * (smax - smin)
@@ -267,7 +277,7 @@ contains
       body%lipschitz = n * mm
       body%curvature = real(n, wp)**2 * mm
       ! cell bounds
-      allocate (clo(ntg, npg), chi(ntg, npg))
+      allocate (clo(ntg, npg), chi(ntg, npg), dcr(ntg))
       do ic = 1, ntg
          if ((ic - 1) * dth <= 0.5_wp * pi .and. ic * dth >= 0.5_wp * pi) then
             smx = 1.0_wp
@@ -275,6 +285,7 @@ contains
             smx = max(sin((ic - 1) * dth), sin(ic * dth))
          end if
          dc = 0.5_wp * (dth + smx * dph)
+         dcr(ic) = dc
          do jc = 1, npg
             hi = max(rg(ic - 1, jc - 1) + gg(ic - 1, jc - 1) * dc, rg(ic, jc - 1) + gg(ic, jc - 1) * dc, &
                      rg(ic - 1, jc) + gg(ic - 1, jc) * dc, rg(ic, jc) + gg(ic, jc) * dc)
@@ -389,16 +400,128 @@ contains
             end do
          end do
       end do
+      call surface_boxes(body, ntg, npg, rg, rt, rp, dcr)
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body
 
-   !> r and |grad r| on the regular grid theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np
+   !> Oriented boxes of the surface pieces of the patches of levels 0..leaf_level. The frame of a
+   !> patch is the surface normal n at its centre (a grid point) and two tangents. For a unit
+   !> vector e, f(u) = e . (r(u) u) restricted to a unit-speed great circle is f = r w with
+   !> w = e . u, w'' = -w and w^2 + w'^2 <= 1, so f'' = (r'' - r) w + 2 r' w' and
+   !>     |f''| <= H_f = sqrt((H + r_max)^2 + 4 G^2)
+   !> (Cauchy-Schwarz, with the Bernstein bounds G >= |r'|, H >= |r''|). As for r, every point of a
+   !> grid cell is within d_c of a corner k along a great circle, so over the cell
+   !>     f <= max_k (f_k + |grad f_k| d_c) + H_f d_c^2/2   (and symmetrically for the minimum),
+   !> with grad f = (e . x_theta, e . x_phi / sin theta), x_theta = r_theta u + r e_theta,
+   !> x_phi / sin theta = (r_phi / sin theta) u + r e_phi. Leaf patches take these bounds over
+   !> their grid points; coarser patches bound the boxes of their four children along their own
+   !> axes. Rounding margins of 1e-11 r_max are added.
+   pure subroutine surface_boxes(body, ntg, npg, rg, rt, rp, dcr)
+      type(contact_body_type), intent(inout) :: body
+      integer, intent(in) :: ntg, npg
+      !> r, dr/dtheta and (dr/dphi)/sin(theta) on the grid; d_c per cell row.
+      real(wp), intent(in) :: rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), dcr(:)
+      real(wp), allocatable :: st(:), ct(:), sp(:), cp(:)
+      real(wp) :: hf, d, e(3, 3), lo(3), hi(3), x(3), xt(3), xp(3), eph(3), f, g, pc, pr, margin
+      integer :: l, i, j, k, kc, ig, jg, i0, j0, m, di, dj, kch
+      allocate (st(0:ntg), ct(0:ntg), sp(0:npg), cp(0:npg))
+      do ig = 0, ntg
+         st(ig) = sin(pi * ig / ntg)
+         ct(ig) = cos(pi * ig / ntg)
+      end do
+      do jg = 0, npg
+         sp(jg) = sin(two_pi * mod(jg, npg) / npg)
+         cp(jg) = cos(two_pi * mod(jg, npg) / npg)
+      end do
+      hf = sqrt((body%curvature + body%r_max)**2 + 4.0_wp * body%lipschitz**2)
+      margin = 1.0e-11_wp * body%r_max
+      allocate (body%obb_c(3, body%off(leaf_level + 1)), body%obb_e(3, 3, body%off(leaf_level + 1)), &
+                body%obb_h(3, body%off(leaf_level + 1)), body%obb_r(body%off(leaf_level + 1)), &
+                body%rc(body%off(leaf_level + 1)))
+      do l = leaf_level, 0, -1
+         kc = cells_per_leaf * 2**(leaf_level - l)
+         do j = 1, patch_cols(l)
+            do i = 1, patch_rows(l)
+               k = patch_index(body, l, i, j)
+               ! frame: normal at the centre grid point
+               ig = (i - 1) * kc + kc / 2
+               jg = (j - 1) * kc + kc / 2
+               call grid_point(ig, jg, x, xt, xp)
+               body%rc(k) = rg(ig, jg)
+               e(:, 3) = cross(xt, xp)
+               e(:, 3) = e(:, 3) / norm2(e(:, 3))
+               eph = [-sp(jg), cp(jg), 0.0_wp]
+               e(:, 1) = eph - dot_product(eph, e(:, 3)) * e(:, 3)
+               e(:, 1) = e(:, 1) / norm2(e(:, 1))
+               e(:, 2) = cross(e(:, 3), e(:, 1))
+               lo = huge(1.0_wp)
+               hi = -huge(1.0_wp)
+               if (l == leaf_level) then
+                  i0 = (i - 1) * kc
+                  j0 = (j - 1) * kc
+                  d = maxval(dcr(i0 + 1:i0 + kc))
+                  do jg = j0, j0 + kc
+                     do ig = i0, i0 + kc
+                        call grid_point(ig, jg, x, xt, xp)
+                        do m = 1, 3
+                           f = dot_product(e(:, m), x)
+                           g = sqrt(dot_product(e(:, m), xt)**2 + dot_product(e(:, m), xp)**2)
+                           lo(m) = min(lo(m), f - g * d)
+                           hi(m) = max(hi(m), f + g * d)
+                        end do
+                     end do
+                  end do
+                  lo = lo - 0.5_wp * hf * d**2
+                  hi = hi + 0.5_wp * hf * d**2
+               else
+                  do dj = 0, 1
+                     do di = 0, 1
+                        kch = patch_index(body, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj)
+                        do m = 1, 3
+                           pc = dot_product(e(:, m), body%obb_c(:, kch))
+                           pr = sum(body%obb_h(:, kch) * abs(matmul(e(:, m), body%obb_e(:, :, kch))))
+                           lo(m) = min(lo(m), pc - pr)
+                           hi(m) = max(hi(m), pc + pr)
+                        end do
+                     end do
+                  end do
+               end if
+               body%obb_c(:, k) = matmul(e, 0.5_wp * (lo + hi))
+               body%obb_e(:, :, k) = e
+               body%obb_h(:, k) = 0.5_wp * (hi - lo) + margin
+               body%obb_r(k) = norm2(body%obb_h(:, k)) * (1.0_wp + 1.0e-12_wp)
+            end do
+         end do
+      end do
+   contains
+      pure subroutine grid_point(ig, jg, x, xt, xp)
+         integer, intent(in) :: ig, jg
+         real(wp), intent(out) :: x(3), xt(3), xp(3)
+         real(wp) :: u(3), eth(3), eph(3)
+         u = [st(ig) * cp(jg), st(ig) * sp(jg), ct(ig)]
+         eth = [ct(ig) * cp(jg), ct(ig) * sp(jg), -st(ig)]
+         eph = [-sp(jg), cp(jg), 0.0_wp]
+         x = rg(ig, jg) * u
+         xt = rt(ig, jg) * u + rg(ig, jg) * eth
+         xp = rp(ig, jg) * u + rg(ig, jg) * eph
+      end subroutine grid_point
+   end subroutine surface_boxes
+
+   !> Cross product.
+   pure function cross(a, b) result(c)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: c(3)
+      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+   end function cross
+
+   !> r and its angular derivatives on the regular grid theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np
    !> (j = 0..np, column np repeating column 0): per ring the sums over degree, then per azimuth
    !> the sums over order with a cos/sin table.
-   pure subroutine synthesize_regular(shape, nt, np, r, g)
+   pure subroutine synthesize_regular(shape, nt, np, r, rt, rp)
       type(sh_expansion_type), intent(in) :: shape
       integer, intent(in) :: nt, np
-      real(wp), intent(out) :: r(0:nt, 0:np), g(0:nt, 0:np)
+      !> r, dr/dtheta and (dr/dphi)/sin(theta).
+      real(wp), intent(out) :: r(0:nt, 0:np), rt(0:nt, 0:np), rp(0:nt, 0:np)
       real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :)
       real(wp), allocatable :: ca(:), cb(:), da(:), db(:), ea(:), eb(:)
       integer, allocatable :: idx_out(:)
@@ -450,7 +573,8 @@ contains
                vp = vp + eb(m) * cs(m, j) - ea(m) * sn(m, j)
             end do
             r(i, j) = vr
-            g(i, j) = sqrt(vt**2 + vp**2)
+            rt(i, j) = vt
+            rp(i, j) = vp
          end do
       end do
    end subroutine synthesize_regular

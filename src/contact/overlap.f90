@@ -93,7 +93,45 @@ module anm_contact_overlap
       real(wp) :: sb = 1.0_wp
    end type pose_type
 
+   !> Fixed data of a box traversal: A-to-B rotation, world scales of the body frames, the box.
+   type :: traversal_type
+      real(wp) :: rot(3, 3) = 0.0_wp
+      real(wp) :: sa = 1.0_wp, sb = 1.0_wp
+      real(wp) :: lo(3) = 0.0_wp, hi(3) = 0.0_wp
+   end type traversal_type
+
+   !> What the box traversal needs to test A's leaf patches against B (`probe_patch`).
+   type :: probe_type
+      type(contact_params_type) :: params
+      real(wp) :: eob_lo(3) = 0.0_wp, eob_hi(3) = 0.0_wp, cbox_lo(3) = 0.0_wp, cbox_hi(3) = 0.0_wp
+      !> Certified mode: radial gap tolerance (B units).
+      real(wp) :: tol = 0.0_wp
+      integer :: stop_level = stored_level
+   end type probe_type
+
+   !> A's patch in a box traversal: level, row, column, storage index; its box (centre, axes,
+   !> half-extents, containing-ball radius) in B's frame; the cone from B's centre holding the
+   !> ball (`cone` false when the ball holds B's centre); `live` false when outside the EOB.
+   type :: a_node_type
+      integer :: l, i, j, k
+      real(wp) :: c(3), e(3, 3), h(3), r
+      real(wp) :: u(3), sinb, cosb
+      logical :: live, cone
+   end type a_node_type
+
+   !> B's patch in a box traversal: level, row, column, storage index; the cone from A's centre
+   !> (A's frame) holding its box's ball.
+   type :: b_node_type
+      integer :: l, i, j, k
+      real(wp) :: u(3), sinb, cosb
+      logical :: live, cone
+   end type b_node_type
+
    integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
+   !> Largest number of probed leaf patches of A remembered by the box traversal.
+   integer, parameter :: max_leaves = 256
+   !> Outcome of the box traversal: no contact (certain), contact found, undecided.
+   integer, parameter :: sep_disjoint = 0, sep_found = 1, sep_unsure = 2
    !> Finest patch level of the wall test (pi/1024 rad; levels beyond stored_level use local bounds).
    integer, parameter :: wall_level = stored_level + 2
 
@@ -123,6 +161,8 @@ contains
       real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
       type(pose_type) :: pab, pba
       logical :: found, certain
+      type(probe_type) :: pr
+      integer :: status
 
       dvec = center_b - center_a
       dist = sqrt(sum(dvec**2))
@@ -162,6 +202,23 @@ contains
       tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
                              scale_b * maxval(body_b%box_hi - body_b%box_lo))
       hit = .true.
+      ! stage 4a: the surfaces' box hierarchies traversed together inside the certified EOB; each
+      ! leaf patch of A left in an unseparated pair is tested against B at once
+      pr%params = params
+      pr%eob_lo = eob_lo
+      pr%eob_hi = eob_hi
+      pr%cbox_lo = cbox_lo
+      pr%cbox_hi = cbox_hi
+      pr%tol = tol / scale_b
+      pr%stop_level = stop_level(params)
+      call separate_surfaces(body_a, body_b, pab, pba, pr, status)
+      if (status == sep_found) return
+      if (status == sep_disjoint) then
+         hit = .false.
+         return
+      end if
+      ! stage 4b: surface of A against B, then (unless A's surface was proven outside B) surface
+      ! of B against A
       call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol / scale_b, found, &
                          certain)
       if (found) return
@@ -603,23 +660,382 @@ contains
       !> Certified mode: radial gap tolerance in B units.
       real(wp), intent(in) :: tol
       logical, intent(out) :: found, certain
-      integer :: i, j, stop_level
-      stop_level = stored_level
-      if (params%certified) then
-         do while (pi / patch_rows(stop_level) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. stop_level < 24)
-            stop_level = stop_level + 1
-         end do
-      end if
+      integer :: i, j, ls
+      ls = stop_level(params)
       found = .false.
       certain = .true.
       do j = 1, patch_cols(0)
          do i = 1, patch_rows(0)
-            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, 0, i, j, a%r_min, &
+            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, ls, 0, i, j, a%r_min, &
                              a%r_max, found, certain)
             if (found) return
          end do
       end do
    end subroutine probe_surface
+
+   !> Finest level of `probe_patch`: stored_level (then N_box scan), in certified mode the level
+   !> whose patches are within `resolution`.
+   pure integer function stop_level(params) result(ls)
+      type(contact_params_type), intent(in) :: params
+      ls = stored_level
+      if (params%certified) then
+         do while (pi / patch_rows(ls) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. ls < 24)
+            ls = ls + 1
+         end do
+      end if
+   end function stop_level
+
+   !> Traverse the surface box hierarchies of A and B together (`body%obb_*`, certified). A pair
+   !> of patches cannot hold a common surface point when the cone of B's patch directions misses
+   !> the cone from B's centre that holds A's box (or vice versa), when their boxes are disjoint
+   !> (containing balls, then the separating axis test), or when one of them lies outside the box
+   !> [lo, hi] (the certified EOB: every common point of the bodies lies in it) or outside the
+   !> other body's certified box. A's tree is descended depth first; each A patch carries the list
+   !> of B patches its parent could not separate, B patches larger than it being replaced by their
+   !> children. A leaf patch of A left with B leaf patches is tested against B at once
+   !> (`probe_patch`; in certified mode first its centre surface point). `status`: sep_found when
+   !> contact was found; sep_disjoint when every leaf patch so tested was found outside B by
+   !> certified tests (then the surfaces do not meet); otherwise sep_unsure.
+   pure subroutine separate_surfaces(a, b, pab, pba, pr, status)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: pab, pba
+      type(probe_type), intent(in) :: pr
+      integer, intent(out) :: status
+      integer :: nleaf, leaves(2, max_leaves)
+      type(traversal_type) :: tr
+      type(a_node_type) :: na
+      type(b_node_type) :: list(patch_rows(0) * patch_cols(0))
+      type(b_node_type) :: nb
+      real(wp) :: bc(3), be(3, 3), bh(3), br
+      integer :: ia, ja, ib, jb, nlist
+      tr%rot = pab%m / pab%k
+      tr%sa = sqrt(sum(pab%rw(:, 1)**2))
+      tr%sb = sqrt(sum(pba%rw(:, 1)**2))
+      tr%lo = pr%cbox_lo
+      tr%hi = pr%cbox_hi
+      status = sep_disjoint
+      nleaf = 0
+      ! B's level-0 patches that meet the EOB and A's certified box (as an oriented box in B's frame)
+      bc = matmul(pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + pab%t
+      be = tr%rot
+      bh = pab%k * 0.5_wp * (a%box_hi - a%box_lo)
+      br = norm2(bh) * (1.0_wp + 1.0e-12_wp)
+      nlist = 0
+      do jb = 1, patch_cols(0)
+         do ib = 1, patch_rows(0)
+            call make_b_node(b, pba, tr, 0, ib, jb, nb)
+            if (.not. nb%live) cycle
+            if (boxes_disjoint(b%obb_c(:, nb%k), b%obb_e(:, :, nb%k), b%obb_h(:, nb%k), b%obb_r(nb%k), bc, be, bh, &
+                               br)) cycle
+            nlist = nlist + 1
+            list(nlist) = nb
+         end do
+      end do
+      if (nlist == 0) return
+      bc = 0.5_wp * (b%box_lo + b%box_hi)
+      be = reshape([1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp], [3, 3])
+      bh = 0.5_wp * (b%box_hi - b%box_lo)
+      br = norm2(bh) * (1.0_wp + 1.0e-12_wp)
+      do ja = 1, patch_cols(0)
+         do ia = 1, patch_rows(0)
+            call make_a_node(a, pab, tr, 0, ia, ja, na)
+            if (.not. na%live) cycle
+            if (boxes_disjoint(na%c, na%e, na%h, na%r, bc, be, bh, br)) cycle
+            call a_descend(a, b, pab, pba, tr, pr, na, list(1:nlist), status, nleaf, leaves)
+            if (status == sep_found) return
+         end do
+      end do
+   end subroutine separate_surfaces
+
+   !> A's patch `na` against the B patches `parent` that its parent could not separate (see
+   !> `separate_surfaces`).
+   pure recursive subroutine a_descend(a, b, pab, pba, tr, pr, na, parent, status, nleaf, leaves)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: pab, pba
+      type(traversal_type), intent(in) :: tr
+      type(probe_type), intent(in) :: pr
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: parent(:)
+      integer, intent(inout) :: status, nleaf, leaves(:, :)
+      integer, parameter :: max_list = 96
+      type(b_node_type) :: list(max_list), work(max_list)
+      type(a_node_type) :: nc
+      integer :: n, nlist, nwork, di, dj, pass
+      logical :: more, ok, found, certain
+      ! B patches larger than A's are replaced by their children
+      nlist = 0
+      ok = .true.
+      do n = 1, size(parent)
+         if (patches_apart(a, b, na, parent(n))) cycle
+         if (parent(n)%l < leaf_level .and. b%obb_r(parent(n)%k) > na%r) then
+            call split_b(a, b, pba, tr, na, parent(n), list, nlist, ok)
+         else if (nlist < max_list) then
+            nlist = nlist + 1
+            list(nlist) = parent(n)
+         else
+            ok = .false.
+         end if
+         if (.not. ok) then
+            status = sep_unsure
+            return
+         end if
+      end do
+      if (nlist == 0) return
+      if (na%l < leaf_level) then
+         do dj = 0, 1
+            do di = 0, 1
+               call make_a_node(a, pab, tr, na%l + 1, 2 * na%i - 1 + di, 2 * na%j - 1 + dj, nc)
+               if (.not. nc%live) cycle
+               call a_descend(a, b, pab, pba, tr, pr, nc, list(1:nlist), status, nleaf, leaves)
+               if (status == sep_found) return
+            end do
+         end do
+         return
+      end if
+      ! leaf of A: refine B down to its leaves
+      do pass = 1, leaf_level + 1
+         more = .false.
+         nwork = 0
+         do n = 1, nlist
+            if (list(n)%l < leaf_level) then
+               more = .true.
+               call split_b(a, b, pba, tr, na, list(n), work, nwork, ok)
+               if (.not. ok) then
+                  status = sep_unsure
+                  return
+               end if
+            else
+               nwork = nwork + 1
+               work(nwork) = list(n)
+            end if
+         end do
+         nlist = nwork
+         list(1:nlist) = work(1:nwork)
+         if (nlist == 0) return
+         if (.not. more) exit
+      end do
+      ! A's leaf patch may meet B's surface: test it against B (once)
+      do n = 1, nleaf
+         if (leaves(1, n) == na%i .and. leaves(2, n) == na%j) return
+      end do
+      if (nleaf < size(leaves, 2)) then
+         nleaf = nleaf + 1
+         leaves(:, nleaf) = [na%i, na%j]
+      end if
+      if (pr%params%certified) then
+         if (radial_gap(b, pab, a%rc(na%k) * a%dir(:, na%k)) <= pr%tol) then
+            status = sep_found
+            return
+         end if
+      end if
+      found = .false.
+      certain = .true.
+      call probe_patch(a, b, pab, pr%eob_lo, pr%eob_hi, pr%cbox_lo, pr%cbox_hi, pr%params, pr%tol, pr%stop_level, &
+                       leaf_level, na%i, na%j, a%r_min, a%r_max, found, certain)
+      if (found) then
+         status = sep_found
+      else if (.not. certain) then
+         status = sep_unsure
+      end if
+   end subroutine a_descend
+
+   !> Append the children of B's patch y that are not separated from A's patch na to out(1:nout)
+   !> (`ok` false when out is full).
+   pure subroutine split_b(a, b, pba, tr, na, y, out, nout, ok)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: pba
+      type(traversal_type), intent(in) :: tr
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: y
+      type(b_node_type), intent(inout) :: out(:)
+      integer, intent(inout) :: nout
+      logical, intent(inout) :: ok
+      type(b_node_type) :: yc
+      integer :: ei, ej, k, l, i, j
+      real(wp) :: d(3)
+      l = y%l + 1
+      do ej = 0, 1
+         do ei = 0, 1
+            i = 2 * y%i - 1 + ei
+            j = 2 * y%j - 1 + ej
+            k = b%off(l) + (j - 1) * ishft(4, l) + i
+            ! cheap tests on stored data first: cone of A's box against the patch cap, balls
+            if (na%cone) then
+               if (cones_apart(na%u, na%sinb, na%cosb, b%dir(:, k), b%cosa(k), b%sina(k))) cycle
+            end if
+            d = b%obb_c(:, k) - na%c
+            if (d(1)**2 + d(2)**2 + d(3)**2 > (na%r + b%obb_r(k))**2 * (1.0_wp + 1.0e-11_wp)) cycle
+            call make_b_node(b, pba, tr, l, i, j, yc)
+            if (.not. yc%live) cycle
+            call keep_b(a, b, na, yc, out, nout, ok)
+         end do
+      end do
+   end subroutine split_b
+
+   !> Append B's patch y to out(1:nout) when it is not separated from A's patch na (`ok` false
+   !> when out is full).
+   pure subroutine keep_b(a, b, na, y, out, nout, ok)
+      type(contact_body_type), intent(in) :: a, b
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: y
+      type(b_node_type), intent(inout) :: out(:)
+      integer, intent(inout) :: nout
+      logical, intent(inout) :: ok
+      if (patches_apart(a, b, na, y)) return
+      if (nout >= size(out)) then
+         ok = .false.
+         return
+      end if
+      nout = nout + 1
+      out(nout) = y
+   end subroutine keep_b
+
+   !> A's patch (l, i, j): its box in B's frame and its cone from B's centre; `live` false when its
+   !> sector ball misses the EOB.
+   pure subroutine make_a_node(a, pab, tr, l, i, j, nd)
+      type(contact_body_type), intent(in) :: a
+      type(pose_type), intent(in) :: pab
+      type(traversal_type), intent(in) :: tr
+      integer, intent(in) :: l, i, j
+      type(a_node_type), intent(out) :: nd
+      integer :: k, m
+      k = a%off(l) + (j - 1) * ishft(4, l) + i
+      nd%l = l
+      nd%i = i
+      nd%j = j
+      nd%k = k
+      nd%live = ball_in_box(pab%cw + pab%rw(:, 1) * a%ball(1, k) + pab%rw(:, 2) * a%ball(2, k) &
+                            + pab%rw(:, 3) * a%ball(3, k), a%brad(k) * tr%sa, tr%lo, tr%hi)
+      if (.not. nd%live) return
+      nd%c = pab%m(:, 1) * a%obb_c(1, k) + pab%m(:, 2) * a%obb_c(2, k) + pab%m(:, 3) * a%obb_c(3, k) + pab%t
+      do m = 1, 3
+         nd%e(:, m) = tr%rot(:, 1) * a%obb_e(1, m, k) + tr%rot(:, 2) * a%obb_e(2, m, k) + tr%rot(:, 3) * a%obb_e(3, m, k)
+      end do
+      nd%h = pab%k * a%obb_h(:, k)
+      nd%r = pab%k * a%obb_r(k) * (1.0_wp + 1.0e-12_wp)
+      call ball_cone(nd%c, nd%r, nd%u, nd%sinb, nd%cosb, nd%cone)
+   end subroutine make_a_node
+
+   !> B's patch (l, i, j): its cone from A's centre (A's frame); `live` false when its sector ball
+   !> misses the EOB.
+   pure subroutine make_b_node(b, pba, tr, l, i, j, nd)
+      type(contact_body_type), intent(in) :: b
+      type(pose_type), intent(in) :: pba
+      type(traversal_type), intent(in) :: tr
+      integer, intent(in) :: l, i, j
+      type(b_node_type), intent(out) :: nd
+      integer :: k
+      real(wp) :: c(3)
+      k = b%off(l) + (j - 1) * ishft(4, l) + i
+      nd%l = l
+      nd%i = i
+      nd%j = j
+      nd%k = k
+      nd%live = ball_in_box(pba%cw + pba%rw(:, 1) * b%ball(1, k) + pba%rw(:, 2) * b%ball(2, k) &
+                            + pba%rw(:, 3) * b%ball(3, k), b%brad(k) * tr%sb, tr%lo, tr%hi)
+      if (.not. nd%live) return
+      c = pba%m(:, 1) * b%obb_c(1, k) + pba%m(:, 2) * b%obb_c(2, k) + pba%m(:, 3) * b%obb_c(3, k) + pba%t
+      call ball_cone(c, pba%k * b%obb_r(k) * (1.0_wp + 1.0e-12_wp), nd%u, nd%sinb, nd%cosb, nd%cone)
+   end subroutine make_b_node
+
+   !> Cone from the origin holding the ball (c, r): axis u, sin and cos of the half-angle
+   !> (`cone` false when the ball holds the origin).
+   pure subroutine ball_cone(c, r, u, sinb, cosb, cone)
+      real(wp), intent(in) :: c(3), r
+      real(wp), intent(out) :: u(3), sinb, cosb
+      logical, intent(out) :: cone
+      real(wp) :: d
+      d = sqrt(c(1)**2 + c(2)**2 + c(3)**2)
+      cone = d > r * (1.0_wp + 1.0e-12_wp)
+      if (.not. cone) then
+         u = 0.0_wp
+         sinb = 1.0_wp
+         cosb = 0.0_wp
+         return
+      end if
+      u = c / d
+      sinb = r / d
+      cosb = sqrt(max(0.0_wp, 1.0_wp - sinb**2))
+   end subroutine ball_cone
+
+   !> True when A's patch na and B's patch y are separated: cones, containing balls, boxes.
+   pure logical function patches_apart(a, b, na, y) result(apart)
+      type(contact_body_type), intent(in) :: a, b
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: y
+      integer :: k
+      apart = .true.
+      k = y%k
+      if (na%cone) then
+         if (cones_apart(na%u, na%sinb, na%cosb, b%dir(:, k), b%cosa(k), b%sina(k))) return
+      end if
+      if (y%cone) then
+         if (cones_apart(y%u, y%sinb, y%cosb, a%dir(:, na%k), a%cosa(na%k), a%sina(na%k))) return
+      end if
+      apart = boxes_disjoint(na%c, na%e, na%h, na%r, b%obb_c(:, k), b%obb_e(:, :, k), b%obb_h(:, k), b%obb_r(k))
+   end function patches_apart
+
+   !> True when the cone (u, sinb, cosb) (half-angle beta <= pi/2) misses the cap (dir, cosa,
+   !> sina) (half-angle alpha <= pi/2): the angle between the axes exceeds alpha + beta, i.e.
+   !> u . dir < cos(alpha + beta) (with a margin).
+   pure logical function cones_apart(u, sinb, cosb, dir, cosa, sina) result(apart)
+      real(wp), intent(in) :: u(3), sinb, cosb, dir(3), cosa, sina
+      apart = cosa >= 0.0_wp .and. &
+              u(1) * dir(1) + u(2) * dir(2) + u(3) * dir(3) < cosa * cosb - sina * sinb - 1.0e-12_wp
+   end function cones_apart
+
+   !> Separating axis test of two oriented boxes (centre, orthonormal axes as columns,
+   !> half-extents, radius of a containing ball): true when their balls are apart or one of the
+   !> 15 axes (6 face normals, 9 edge cross products) separates them, with a relative margin so
+   !> that "disjoint" holds despite rounding. The normals (the thin directions) come first.
+   pure logical function boxes_disjoint(c1, e1, h1, r1, c2, e2, h2, r2) result(sep)
+      real(wp), intent(in) :: c1(3), e1(3, 3), h1(3), r1, c2(3), e2(3, 3), h2(3), r2
+      real(wp), parameter :: eps = 1.0e-12_wp
+      real(wp) :: r(3, 3), ar(3, 3), t(3), d(3), ra, rb, tol, dd
+      integer :: i, j, i1, i2, j1, j2
+      sep = .true.
+      d = c2 - c1
+      dd = d(1)**2 + d(2)**2 + d(3)**2
+      if (dd > (r1 + r2)**2 * (1.0_wp + 4.0_wp * eps)) return
+      tol = eps * (r1 + r2 + sqrt(dd))
+      ! normal of box 2
+      do i = 1, 3
+         r(i, 3) = e1(1, i) * e2(1, 3) + e1(2, i) * e2(2, 3) + e1(3, i) * e2(3, 3)
+      end do
+      if (abs(d(1) * e2(1, 3) + d(2) * e2(2, 3) + d(3) * e2(3, 3)) > &
+          h2(3) + h1(1) * abs(r(1, 3)) + h1(2) * abs(r(2, 3)) + h1(3) * abs(r(3, 3)) + tol) return
+      do j = 1, 2
+         do i = 1, 3
+            r(i, j) = e1(1, i) * e2(1, j) + e1(2, i) * e2(2, j) + e1(3, i) * e2(3, j)
+         end do
+      end do
+      ar = abs(r) + eps
+      do i = 1, 3
+         t(i) = d(1) * e1(1, i) + d(2) * e1(2, i) + d(3) * e1(3, i)
+      end do
+      ! faces of box 1 (normal first), then the other faces of box 2
+      if (abs(t(3)) > h1(3) + h2(1) * ar(3, 1) + h2(2) * ar(3, 2) + h2(3) * ar(3, 3) + tol) return
+      do i = 1, 2
+         if (abs(t(i)) > h1(i) + h2(1) * ar(i, 1) + h2(2) * ar(i, 2) + h2(3) * ar(i, 3) + tol) return
+      end do
+      do j = 1, 2
+         if (abs(t(1) * r(1, j) + t(2) * r(2, j) + t(3) * r(3, j)) > &
+             h2(j) + h1(1) * ar(1, j) + h1(2) * ar(2, j) + h1(3) * ar(3, j) + tol) return
+      end do
+      ! edge-edge axes e1_i x e2_j
+      do i = 1, 3
+         i1 = mod(i, 3) + 1
+         i2 = mod(i + 1, 3) + 1
+         do j = 1, 3
+            j1 = mod(j, 3) + 1
+            j2 = mod(j + 1, 3) + 1
+            ra = h1(i1) * ar(i2, j) + h1(i2) * ar(i1, j)
+            rb = h2(j1) * ar(i, j2) + h2(j2) * ar(i, j1)
+            if (abs(t(i2) * r(i1, j) - t(i1) * r(i2, j)) > ra + rb + tol) return
+         end do
+      end do
+      sep = .false.
+   end function boxes_disjoint
 
    pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, l, &
                                          i, j, plo, phi, found, certain)
