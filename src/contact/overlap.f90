@@ -104,8 +104,8 @@ module anm_contact_overlap
    type :: probe_type
       type(contact_params_type) :: params
       real(wp) :: eob_lo(3) = 0.0_wp, eob_hi(3) = 0.0_wp, cbox_lo(3) = 0.0_wp, cbox_hi(3) = 0.0_wp
-      !> Certified mode: radial gap tolerance (B units).
-      real(wp) :: tol = 0.0_wp
+      !> Certified mode: radial gap tolerance in B units and in A units.
+      real(wp) :: tol = 0.0_wp, tol_a = 0.0_wp
       integer :: stop_level = stored_level
    end type probe_type
 
@@ -210,6 +210,7 @@ contains
       pr%cbox_lo = cbox_lo
       pr%cbox_hi = cbox_hi
       pr%tol = tol / scale_b
+      pr%tol_a = tol / scale_a
       pr%stop_level = stop_level(params)
       call separate_surfaces(body_a, body_b, pab, pba, pr, status)
       if (status == sep_found) return
@@ -692,16 +693,20 @@ contains
    !> [lo, hi] (the certified EOB: every common point of the bodies lies in it) or outside the
    !> other body's certified box. A's tree is descended depth first; each A patch carries the list
    !> of B patches its parent could not separate, B patches larger than it being replaced by their
-   !> children. A leaf patch of A left with B leaf patches is tested against B at once
-   !> (`probe_patch`; in certified mode first its centre surface point). `status`: sep_found when
-   !> contact was found; sep_disjoint when every leaf patch so tested was found outside B by
-   !> certified tests (then the surfaces do not meet); otherwise sep_unsure.
+   !> children. When a leaf patch of A is left with leaf patches of B, witnesses of contact are
+   !> tested at once: the N_box scan points (in the EOB) of these leaf patches in default mode,
+   !> their centre surface points (within the gap tolerance) in certified mode. After the
+   !> traversal, if no witness was found, each such leaf patch of A is tested against B with
+   !> `probe_patch`. `status`: sep_found when contact was found; sep_disjoint when every such leaf
+   !> patch was found outside B by certified tests (then the surfaces do not meet); otherwise
+   !> sep_unsure.
    pure subroutine separate_surfaces(a, b, pab, pba, pr, status)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: pab, pba
       type(probe_type), intent(in) :: pr
       integer, intent(out) :: status
-      integer :: nleaf, leaves(2, max_leaves)
+      integer :: nleaf, leaves(3, max_leaves), nbseen, bseen(max_leaves), n
+      logical :: found, certain
       type(traversal_type) :: tr
       type(a_node_type) :: na
       type(b_node_type) :: list(patch_rows(0) * patch_cols(0))
@@ -715,6 +720,7 @@ contains
       tr%hi = pr%cbox_hi
       status = sep_disjoint
       nleaf = 0
+      nbseen = 0
       ! B's level-0 patches that meet the EOB and A's certified box (as an oriented box in B's frame)
       bc = matmul(pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + pab%t
       be = tr%rot
@@ -741,27 +747,43 @@ contains
             call make_a_node(a, pab, tr, 0, ia, ja, na)
             if (.not. na%live) cycle
             if (boxes_disjoint(na%c, na%e, na%h, na%r, bc, be, bh, br)) cycle
-            call a_descend(a, b, pab, pba, tr, pr, na, list(1:nlist), status, nleaf, leaves)
+            call a_descend(a, b, pab, pba, tr, pr, na, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
             if (status == sep_found) return
          end do
+      end do
+      if (status /= sep_disjoint) return
+      ! no witness of contact: prove each leaf of A outside B (or find contact)
+      do n = 1, nleaf
+         found = .false.
+         certain = .true.
+         call probe_patch(a, b, pab, pr%eob_lo, pr%eob_hi, pr%cbox_lo, pr%cbox_hi, pr%params, pr%tol, &
+                          pr%stop_level, leaf_level, leaves(2, n), leaves(3, n), a%r_min, a%r_max, found, certain)
+         if (found) then
+            status = sep_found
+            return
+         end if
+         if (.not. certain) status = sep_unsure
       end do
    end subroutine separate_surfaces
 
    !> A's patch `na` against the B patches `parent` that its parent could not separate (see
    !> `separate_surfaces`).
-   pure recursive subroutine a_descend(a, b, pab, pba, tr, pr, na, parent, status, nleaf, leaves)
+   pure recursive subroutine a_descend(a, b, pab, pba, tr, pr, na, parent, status, nleaf, leaves, nbseen, bseen)
       type(contact_body_type), intent(in) :: a, b
       type(pose_type), intent(in) :: pab, pba
       type(traversal_type), intent(in) :: tr
       type(probe_type), intent(in) :: pr
       type(a_node_type), intent(in) :: na
       type(b_node_type), intent(in) :: parent(:)
-      integer, intent(inout) :: status, nleaf, leaves(:, :)
+      !> Traversal status; A's leaf patches met (storage index, row, column); B's leaf patches
+      !> whose witness was tested (storage index).
+      integer, intent(inout) :: status, nleaf, leaves(:, :), nbseen, bseen(:)
       integer, parameter :: max_list = 96
       type(b_node_type) :: list(max_list), work(max_list)
       type(a_node_type) :: nc
       integer :: n, nlist, nwork, di, dj, pass
-      logical :: more, ok, found, certain
+      logical :: more, ok, found
+      real(wp) :: th0, th1, ph0, ph1
       ! B patches larger than A's are replaced by their children
       nlist = 0
       ok = .true.
@@ -786,7 +808,7 @@ contains
             do di = 0, 1
                call make_a_node(a, pab, tr, na%l + 1, 2 * na%i - 1 + di, 2 * na%j - 1 + dj, nc)
                if (.not. nc%live) cycle
-               call a_descend(a, b, pab, pba, tr, pr, nc, list(1:nlist), status, nleaf, leaves)
+               call a_descend(a, b, pab, pba, tr, pr, nc, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
                if (status == sep_found) return
             end do
          end do
@@ -814,28 +836,53 @@ contains
          if (nlist == 0) return
          if (.not. more) exit
       end do
-      ! A's leaf patch may meet B's surface: test it against B (once)
+      ! A's leaf patch may meet B's surface: remember it (once)
       do n = 1, nleaf
-         if (leaves(1, n) == na%i .and. leaves(2, n) == na%j) return
+         if (leaves(1, n) == na%k) return
       end do
-      if (nleaf < size(leaves, 2)) then
-         nleaf = nleaf + 1
-         leaves(:, nleaf) = [na%i, na%j]
+      if (nleaf >= size(leaves, 2)) then
+         status = sep_unsure
+         return
       end if
+      nleaf = nleaf + 1
+      leaves(:, nleaf) = [na%k, na%i, na%j]
       if (pr%params%certified) then
+         ! witnesses of contact first (the proofs wait until every leaf is known): the centre
+         ! surface points of A's leaf and of the B leaves, tested along the ray from the other
+         ! centre
          if (radial_gap(b, pab, a%rc(na%k) * a%dir(:, na%k)) <= pr%tol) then
             status = sep_found
             return
          end if
-      end if
-      found = .false.
-      certain = .true.
-      call probe_patch(a, b, pab, pr%eob_lo, pr%eob_hi, pr%cbox_lo, pr%cbox_hi, pr%params, pr%tol, pr%stop_level, &
-                       leaf_level, na%i, na%j, a%r_min, a%r_max, found, certain)
-      if (found) then
-         status = sep_found
-      else if (.not. certain) then
-         status = sep_unsure
+         do n = 1, nlist
+            if (any(bseen(1:min(nbseen, size(bseen))) == list(n)%k)) cycle
+            nbseen = nbseen + 1
+            if (nbseen <= size(bseen)) bseen(nbseen) = list(n)%k
+            if (radial_gap(a, pba, b%rc(list(n)%k) * b%dir(:, list(n)%k)) <= pr%tol_a) then
+               status = sep_found
+               return
+            end if
+         end do
+      else
+         ! default mode: the N_box scan points of A's leaf and of the B leaves
+         call patch_rect(leaf_level, na%i, na%j, th0, th1, ph0, ph1)
+         found = .false.
+         call scan_rect(a, b, pab, pr%eob_lo, pr%eob_hi, pr%params%nbox, th0, th1, ph0, ph1, found)
+         if (found) then
+            status = sep_found
+            return
+         end if
+         do n = 1, nlist
+            if (any(bseen(1:min(nbseen, size(bseen))) == list(n)%k)) cycle
+            nbseen = nbseen + 1
+            if (nbseen <= size(bseen)) bseen(nbseen) = list(n)%k
+            call patch_rect(leaf_level, list(n)%i, list(n)%j, th0, th1, ph0, ph1)
+            call scan_rect(b, a, pba, pr%eob_lo, pr%eob_hi, pr%params%nbox, th0, th1, ph0, ph1, found)
+            if (found) then
+               status = sep_found
+               return
+            end if
+         end do
       end if
    end subroutine a_descend
 
