@@ -36,6 +36,7 @@ module anm_contact_body
 
    public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
+   public :: node_size, nd_dir, nd_cosa, nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
    integer, parameter :: leaf_level = 4
@@ -45,6 +46,14 @@ module anm_contact_body
    integer, parameter :: cells_per_leaf = 8
    !> Thesis default N_ext.
    integer, parameter :: default_next = 40
+
+   !> Layout of a column of `contact_body_type%node` (one patch of levels 0..leaf_level): cap
+   !> centre direction (3), cos and sin of the cap half-angle; oriented box of the surface piece:
+   !> centre (3), radius of a ball about the centre containing the box, axes (3 x 3, columns; the
+   !> third is the surface normal at the patch centre), half-extents (3); sector ball centre (3)
+   !> and radius; r at the cap centre direction.
+   integer, parameter :: nd_dir = 1, nd_cosa = 4, nd_sina = 5, nd_c = 6, nd_r = 9, nd_e = 10, nd_h = 19, &
+                         nd_ball = 22, nd_brad = 25, nd_rc = 26, node_size = 26
 
    !> Immutable per-(shape, order) contact data, shared by all particles of that shape and by all
    !> threads.
@@ -88,15 +97,12 @@ module anm_contact_body
       real(wp), allocatable :: row_ct(:), row_st(:), row_cosa(:), row_sina(:)
       !> Per patch column: cos and sin of the mid azimuth.
       real(wp), allocatable :: col_cp(:), col_sp(:)
-      !> Oriented box of the surface piece {r(u) u : u in patch} of each patch of levels
-      !> 0..leaf_level (same indexing as `dir`): centre (3, npatch), orthonormal axes as columns
-      !> (3, 3, npatch; the third is the surface normal at the patch centre) and half-extents
-      !> (3, npatch): every such point x has |e_i . (x - c)| <= h_i (certified, `surface_boxes`).
-      real(wp), allocatable :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
-      !> Radius of a ball about obb_c containing the box (|h| rounded up).
-      real(wp), allocatable :: obb_r(:)
-      !> r at the centre direction `dir` of each patch of levels 0..leaf_level (a surface point).
-      real(wp), allocatable :: rc(:)
+      !> Per patch of levels 0..leaf_level (same indexing as `dir`), packed for the contact
+      !> traversal (layout nd_*, node_size rows): the cap and sector ball (copies of dir, cosa,
+      !> sina, ball, brad), r at the cap centre direction (a surface point) and the oriented box
+      !> of the surface piece {r(u) u : u in patch}: every such point x has |e_i . (x - c)| <= h_i
+      !> (certified, `surface_boxes`).
+      real(wp), allocatable :: node(:, :)
    end type contact_body_type
 
 contains
@@ -423,7 +429,8 @@ contains
       real(wp), intent(in) :: rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), dcr(:)
       real(wp), allocatable :: st(:), ct(:), sp(:), cp(:)
       real(wp) :: hf, d, e(3, 3), lo(3), hi(3), x(3), xt(3), xp(3), eph(3), f, g, pc, pr, margin
-      integer :: l, i, j, k, kc, ig, jg, i0, j0, m, di, dj, kch
+      real(wp), allocatable :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
+      integer :: l, i, j, k, kc, ig, jg, i0, j0, m, di, dj, kch, np
       allocate (st(0:ntg), ct(0:ntg), sp(0:npg), cp(0:npg))
       do ig = 0, ntg
          st(ig) = sin(pi * ig / ntg)
@@ -435,9 +442,8 @@ contains
       end do
       hf = sqrt((body%curvature + body%r_max)**2 + 4.0_wp * body%lipschitz**2)
       margin = 1.0e-11_wp * body%r_max
-      allocate (body%obb_c(3, body%off(leaf_level + 1)), body%obb_e(3, 3, body%off(leaf_level + 1)), &
-                body%obb_h(3, body%off(leaf_level + 1)), body%obb_r(body%off(leaf_level + 1)), &
-                body%rc(body%off(leaf_level + 1)))
+      np = body%off(leaf_level + 1)
+      allocate (obb_c(3, np), obb_e(3, 3, np), obb_h(3, np), body%node(node_size, np))
       do l = leaf_level, 0, -1
          kc = cells_per_leaf * 2**(leaf_level - l)
          do j = 1, patch_cols(l)
@@ -447,7 +453,7 @@ contains
                ig = (i - 1) * kc + kc / 2
                jg = (j - 1) * kc + kc / 2
                call grid_point(ig, jg, x, xt, xp)
-               body%rc(k) = rg(ig, jg)
+               body%node(nd_rc, k) = rg(ig, jg)
                e(:, 3) = cross(xt, xp)
                e(:, 3) = e(:, 3) / norm2(e(:, 3))
                eph = [-sp(jg), cp(jg), 0.0_wp]
@@ -478,20 +484,30 @@ contains
                      do di = 0, 1
                         kch = patch_index(body, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj)
                         do m = 1, 3
-                           pc = dot_product(e(:, m), body%obb_c(:, kch))
-                           pr = sum(body%obb_h(:, kch) * abs(matmul(e(:, m), body%obb_e(:, :, kch))))
+                           pc = dot_product(e(:, m), obb_c(:, kch))
+                           pr = sum(obb_h(:, kch) * abs(matmul(e(:, m), obb_e(:, :, kch))))
                            lo(m) = min(lo(m), pc - pr)
                            hi(m) = max(hi(m), pc + pr)
                         end do
                      end do
                   end do
                end if
-               body%obb_c(:, k) = matmul(e, 0.5_wp * (lo + hi))
-               body%obb_e(:, :, k) = e
-               body%obb_h(:, k) = 0.5_wp * (hi - lo) + margin
-               body%obb_r(k) = norm2(body%obb_h(:, k)) * (1.0_wp + 1.0e-12_wp)
+               obb_c(:, k) = matmul(e, 0.5_wp * (lo + hi))
+               obb_e(:, :, k) = e
+               obb_h(:, k) = 0.5_wp * (hi - lo) + margin
             end do
          end do
+      end do
+      do k = 1, np
+         body%node(nd_dir:nd_dir + 2, k) = body%dir(:, k)
+         body%node(nd_cosa, k) = body%cosa(k)
+         body%node(nd_sina, k) = body%sina(k)
+         body%node(nd_c:nd_c + 2, k) = obb_c(:, k)
+         body%node(nd_r, k) = norm2(obb_h(:, k)) * (1.0_wp + 1.0e-12_wp)
+         body%node(nd_e:nd_e + 8, k) = reshape(obb_e(:, :, k), [9])
+         body%node(nd_h:nd_h + 2, k) = obb_h(:, k)
+         body%node(nd_ball:nd_ball + 2, k) = body%ball(:, k)
+         body%node(nd_brad, k) = body%brad(k)
       end do
    contains
       pure subroutine grid_point(ig, jg, x, xt, xp)

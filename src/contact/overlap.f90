@@ -38,7 +38,8 @@
 module anm_contact_overlap
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, node_size, nd_dir, nd_cosa, &
+      & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
    implicit none
    private
 
@@ -111,12 +112,12 @@ module anm_contact_overlap
 
    !> A's patch in a box traversal: level, row, column, storage index; its box (centre, axes,
    !> half-extents, containing-ball radius) in B's frame; the cone from B's centre holding the
-   !> ball (`cone` false when the ball holds B's centre); `live` false when outside the EOB.
+   !> ball (`cone` false when the ball holds B's centre).
    type :: a_node_type
       integer :: l, i, j, k
       real(wp) :: c(3), e(3, 3), h(3), r
       real(wp) :: u(3), sinb, cosb
-      logical :: live, cone
+      logical :: cone
    end type a_node_type
 
    !> B's patch in a box traversal: level, row, column, storage index; the cone from A's centre
@@ -124,7 +125,7 @@ module anm_contact_overlap
    type :: b_node_type
       integer :: l, i, j, k
       real(wp) :: u(3), sinb, cosb
-      logical :: live, cone
+      logical :: cone
    end type b_node_type
 
    integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
@@ -706,7 +707,7 @@ contains
       type(probe_type), intent(in) :: pr
       integer, intent(out) :: status
       integer :: nleaf, leaves(3, max_leaves), nbseen, bseen(max_leaves), n
-      logical :: found, certain
+      logical :: found, certain, live
       type(traversal_type) :: tr
       type(a_node_type) :: na
       type(b_node_type) :: list(patch_rows(0) * patch_cols(0))
@@ -721,7 +722,7 @@ contains
       status = sep_disjoint
       nleaf = 0
       nbseen = 0
-      ! B's level-0 patches that meet the EOB and A's certified box (as an oriented box in B's frame)
+      ! B's level-0 patches that meet the EOB and A's certified box (an oriented box in B's frame)
       bc = matmul(pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + pab%t
       be = tr%rot
       bh = pab%k * 0.5_wp * (a%box_hi - a%box_lo)
@@ -729,10 +730,10 @@ contains
       nlist = 0
       do jb = 1, patch_cols(0)
          do ib = 1, patch_rows(0)
-            call make_b_node(b, pba, tr, 0, ib, jb, nb)
-            if (.not. nb%live) cycle
-            if (boxes_disjoint(b%obb_c(:, nb%k), b%obb_e(:, :, nb%k), b%obb_h(:, nb%k), b%obb_r(nb%k), bc, be, bh, &
-                               br)) cycle
+            call make_b_node(b%node, b%off, pba, tr, 0, ib, jb, nb, live)
+            if (.not. live) cycle
+            if (boxes_disjoint(b%node(nd_c:nd_c + 2, nb%k), b%node(nd_e:nd_e + 8, nb%k), b%node(nd_h:nd_h + 2, nb%k), &
+                               b%node(nd_r, nb%k), bc, be, bh, br)) cycle
             nlist = nlist + 1
             list(nlist) = nb
          end do
@@ -744,8 +745,8 @@ contains
       br = norm2(bh) * (1.0_wp + 1.0e-12_wp)
       do ja = 1, patch_cols(0)
          do ia = 1, patch_rows(0)
-            call make_a_node(a, pab, tr, 0, ia, ja, na)
-            if (.not. na%live) cycle
+            call make_a_node(a%node, a%off, pab, tr, 0, ia, ja, na, live)
+            if (.not. live) cycle
             if (boxes_disjoint(na%c, na%e, na%h, na%r, bc, be, bh, br)) cycle
             call a_descend(a, b, pab, pba, tr, pr, na, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
             if (status == sep_found) return
@@ -782,15 +783,15 @@ contains
       type(b_node_type) :: list(max_list), work(max_list)
       type(a_node_type) :: nc
       integer :: n, nlist, nwork, di, dj, pass
-      logical :: more, ok, found
+      logical :: more, ok, found, live
       real(wp) :: th0, th1, ph0, ph1
-      ! B patches larger than A's are replaced by their children
+      ! B patches not separated from A's patch; those larger than it are replaced by their children
       nlist = 0
       ok = .true.
       do n = 1, size(parent)
-         if (patches_apart(a, b, na, parent(n))) cycle
-         if (parent(n)%l < leaf_level .and. b%obb_r(parent(n)%k) > na%r) then
-            call split_b(a, b, pba, tr, na, parent(n), list, nlist, ok)
+         if (patches_apart(a%node, b%node, na, parent(n))) cycle
+         if (parent(n)%l < leaf_level .and. b%node(nd_r, parent(n)%k) > na%r) then
+            call split_b(a%node, b%node, b%off, pba, tr, na, parent(n), list, nlist, ok)
          else if (nlist < max_list) then
             nlist = nlist + 1
             list(nlist) = parent(n)
@@ -806,8 +807,8 @@ contains
       if (na%l < leaf_level) then
          do dj = 0, 1
             do di = 0, 1
-               call make_a_node(a, pab, tr, na%l + 1, 2 * na%i - 1 + di, 2 * na%j - 1 + dj, nc)
-               if (.not. nc%live) cycle
+               call make_a_node(a%node, a%off, pab, tr, na%l + 1, 2 * na%i - 1 + di, 2 * na%j - 1 + dj, nc, live)
+               if (.not. live) cycle
                call a_descend(a, b, pab, pba, tr, pr, nc, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
                if (status == sep_found) return
             end do
@@ -821,7 +822,7 @@ contains
          do n = 1, nlist
             if (list(n)%l < leaf_level) then
                more = .true.
-               call split_b(a, b, pba, tr, na, list(n), work, nwork, ok)
+               call split_b(a%node, b%node, b%off, pba, tr, na, list(n), work, nwork, ok)
                if (.not. ok) then
                   status = sep_unsure
                   return
@@ -850,7 +851,7 @@ contains
          ! witnesses of contact first (the proofs wait until every leaf is known): the centre
          ! surface points of A's leaf and of the B leaves, tested along the ray from the other
          ! centre
-         if (radial_gap(b, pab, a%rc(na%k) * a%dir(:, na%k)) <= pr%tol) then
+         if (radial_gap(b, pab, a%node(nd_rc, na%k) * a%node(nd_dir:nd_dir + 2, na%k)) <= pr%tol) then
             status = sep_found
             return
          end if
@@ -858,7 +859,7 @@ contains
             if (any(bseen(1:min(nbseen, size(bseen))) == list(n)%k)) cycle
             nbseen = nbseen + 1
             if (nbseen <= size(bseen)) bseen(nbseen) = list(n)%k
-            if (radial_gap(a, pba, b%rc(list(n)%k) * b%dir(:, list(n)%k)) <= pr%tol_a) then
+            if (radial_gap(a, pba, b%node(nd_rc, list(n)%k) * b%node(nd_dir:nd_dir + 2, list(n)%k)) <= pr%tol_a) then
                status = sep_found
                return
             end if
@@ -887,9 +888,10 @@ contains
    end subroutine a_descend
 
    !> Append the children of B's patch y that are not separated from A's patch na to out(1:nout)
-   !> (`ok` false when out is full).
-   pure subroutine split_b(a, b, pba, tr, na, y, out, nout, ok)
-      type(contact_body_type), intent(in) :: a, b
+   !> (`ok` false when out is full). pa, pb: the bodies' `node` arrays; offb: B's level offsets.
+   pure subroutine split_b(pa, pb, offb, pba, tr, na, y, out, nout, ok)
+      real(wp), intent(in) :: pa(node_size, *), pb(node_size, *)
+      integer, intent(in) :: offb(0:)
       type(pose_type), intent(in) :: pba
       type(traversal_type), intent(in) :: tr
       type(a_node_type), intent(in) :: na
@@ -899,90 +901,106 @@ contains
       logical, intent(inout) :: ok
       type(b_node_type) :: yc
       integer :: ei, ej, k, l, i, j
-      real(wp) :: d(3)
+      real(wp) :: dx, dy, dz
+      logical :: live
       l = y%l + 1
       do ej = 0, 1
          do ei = 0, 1
             i = 2 * y%i - 1 + ei
             j = 2 * y%j - 1 + ej
-            k = b%off(l) + (j - 1) * ishft(4, l) + i
+            k = offb(l) + (j - 1) * ishft(4, l) + i
             ! cheap tests on stored data first: cone of A's box against the patch cap, balls
             if (na%cone) then
-               if (cones_apart(na%u, na%sinb, na%cosb, b%dir(:, k), b%cosa(k), b%sina(k))) cycle
+               if (cones_apart(na%u, na%sinb, na%cosb, pb(nd_dir:nd_dir + 2, k), pb(nd_cosa, k), pb(nd_sina, k))) cycle
             end if
-            d = b%obb_c(:, k) - na%c
-            if (d(1)**2 + d(2)**2 + d(3)**2 > (na%r + b%obb_r(k))**2 * (1.0_wp + 1.0e-11_wp)) cycle
-            call make_b_node(b, pba, tr, l, i, j, yc)
-            if (.not. yc%live) cycle
-            call keep_b(a, b, na, yc, out, nout, ok)
+            dx = pb(nd_c, k) - na%c(1)
+            dy = pb(nd_c + 1, k) - na%c(2)
+            dz = pb(nd_c + 2, k) - na%c(3)
+            if (dx * dx + dy * dy + dz * dz > (na%r + pb(nd_r, k))**2 * (1.0_wp + 1.0e-11_wp)) cycle
+            call make_b_node(pb, offb, pba, tr, l, i, j, yc, live)
+            if (.not. live) cycle
+            if (yc%cone) then
+               if (cones_apart(yc%u, yc%sinb, yc%cosb, pa(nd_dir:nd_dir + 2, na%k), pa(nd_cosa, na%k), &
+                               pa(nd_sina, na%k))) cycle
+            end if
+            if (boxes_disjoint(na%c, na%e, na%h, na%r, pb(nd_c:nd_c + 2, k), pb(nd_e:nd_e + 8, k), pb(nd_h:nd_h + 2, k), &
+                               pb(nd_r, k))) cycle
+            if (nout >= size(out)) then
+               ok = .false.
+               return
+            end if
+            nout = nout + 1
+            out(nout) = yc
          end do
       end do
    end subroutine split_b
 
-   !> Append B's patch y to out(1:nout) when it is not separated from A's patch na (`ok` false
-   !> when out is full).
-   pure subroutine keep_b(a, b, na, y, out, nout, ok)
-      type(contact_body_type), intent(in) :: a, b
-      type(a_node_type), intent(in) :: na
-      type(b_node_type), intent(in) :: y
-      type(b_node_type), intent(inout) :: out(:)
-      integer, intent(inout) :: nout
-      logical, intent(inout) :: ok
-      if (patches_apart(a, b, na, y)) return
-      if (nout >= size(out)) then
-         ok = .false.
-         return
-      end if
-      nout = nout + 1
-      out(nout) = y
-   end subroutine keep_b
-
-   !> A's patch (l, i, j): its box in B's frame and its cone from B's centre; `live` false when its
-   !> sector ball misses the EOB.
-   pure subroutine make_a_node(a, pab, tr, l, i, j, nd)
-      type(contact_body_type), intent(in) :: a
+   !> A's patch (l, i, j): its box in B's frame and its cone from B's centre; `live` false when
+   !> its sector ball misses the EOB. pa: A's `node` array; offa: its level offsets.
+   pure subroutine make_a_node(pa, offa, pab, tr, l, i, j, nd, live)
+      real(wp), intent(in) :: pa(node_size, *)
+      integer, intent(in) :: offa(0:)
       type(pose_type), intent(in) :: pab
       type(traversal_type), intent(in) :: tr
       integer, intent(in) :: l, i, j
       type(a_node_type), intent(out) :: nd
+      logical, intent(out) :: live
       integer :: k, m
-      k = a%off(l) + (j - 1) * ishft(4, l) + i
+      real(wp) :: x1, x2, x3
+      k = offa(l) + (j - 1) * ishft(4, l) + i
       nd%l = l
       nd%i = i
       nd%j = j
       nd%k = k
-      nd%live = ball_in_box(pab%cw + pab%rw(:, 1) * a%ball(1, k) + pab%rw(:, 2) * a%ball(2, k) &
-                            + pab%rw(:, 3) * a%ball(3, k), a%brad(k) * tr%sa, tr%lo, tr%hi)
-      if (.not. nd%live) return
-      nd%c = pab%m(:, 1) * a%obb_c(1, k) + pab%m(:, 2) * a%obb_c(2, k) + pab%m(:, 3) * a%obb_c(3, k) + pab%t
-      do m = 1, 3
-         nd%e(:, m) = tr%rot(:, 1) * a%obb_e(1, m, k) + tr%rot(:, 2) * a%obb_e(2, m, k) + tr%rot(:, 3) * a%obb_e(3, m, k)
+      x1 = pa(nd_ball, k)
+      x2 = pa(nd_ball + 1, k)
+      x3 = pa(nd_ball + 2, k)
+      live = ball_in_box(pab%cw + pab%rw(:, 1) * x1 + pab%rw(:, 2) * x2 + pab%rw(:, 3) * x3, pa(nd_brad, k) * tr%sa, &
+                         tr%lo, tr%hi)
+      if (.not. live) return
+      x1 = pa(nd_c, k)
+      x2 = pa(nd_c + 1, k)
+      x3 = pa(nd_c + 2, k)
+      nd%c = pab%m(:, 1) * x1 + pab%m(:, 2) * x2 + pab%m(:, 3) * x3 + pab%t
+      do m = 0, 2
+         x1 = pa(nd_e + 3 * m, k)
+         x2 = pa(nd_e + 3 * m + 1, k)
+         x3 = pa(nd_e + 3 * m + 2, k)
+         nd%e(:, m + 1) = tr%rot(:, 1) * x1 + tr%rot(:, 2) * x2 + tr%rot(:, 3) * x3
       end do
-      nd%h = pab%k * a%obb_h(:, k)
-      nd%r = pab%k * a%obb_r(k) * (1.0_wp + 1.0e-12_wp)
+      nd%h = pab%k * pa(nd_h:nd_h + 2, k)
+      nd%r = pab%k * pa(nd_r, k) * (1.0_wp + 1.0e-12_wp)
       call ball_cone(nd%c, nd%r, nd%u, nd%sinb, nd%cosb, nd%cone)
    end subroutine make_a_node
 
-   !> B's patch (l, i, j): its cone from A's centre (A's frame); `live` false when its sector ball
-   !> misses the EOB.
-   pure subroutine make_b_node(b, pba, tr, l, i, j, nd)
-      type(contact_body_type), intent(in) :: b
+   !> B's patch (l, i, j): its cone from A's centre (A's frame); `live` false when its sector
+   !> ball misses the EOB. pb: B's `node` array; offb: its level offsets.
+   pure subroutine make_b_node(pb, offb, pba, tr, l, i, j, nd, live)
+      real(wp), intent(in) :: pb(node_size, *)
+      integer, intent(in) :: offb(0:)
       type(pose_type), intent(in) :: pba
       type(traversal_type), intent(in) :: tr
       integer, intent(in) :: l, i, j
       type(b_node_type), intent(out) :: nd
+      logical, intent(out) :: live
       integer :: k
-      real(wp) :: c(3)
-      k = b%off(l) + (j - 1) * ishft(4, l) + i
+      real(wp) :: c(3), x1, x2, x3
+      k = offb(l) + (j - 1) * ishft(4, l) + i
       nd%l = l
       nd%i = i
       nd%j = j
       nd%k = k
-      nd%live = ball_in_box(pba%cw + pba%rw(:, 1) * b%ball(1, k) + pba%rw(:, 2) * b%ball(2, k) &
-                            + pba%rw(:, 3) * b%ball(3, k), b%brad(k) * tr%sb, tr%lo, tr%hi)
-      if (.not. nd%live) return
-      c = pba%m(:, 1) * b%obb_c(1, k) + pba%m(:, 2) * b%obb_c(2, k) + pba%m(:, 3) * b%obb_c(3, k) + pba%t
-      call ball_cone(c, pba%k * b%obb_r(k) * (1.0_wp + 1.0e-12_wp), nd%u, nd%sinb, nd%cosb, nd%cone)
+      x1 = pb(nd_ball, k)
+      x2 = pb(nd_ball + 1, k)
+      x3 = pb(nd_ball + 2, k)
+      live = ball_in_box(pba%cw + pba%rw(:, 1) * x1 + pba%rw(:, 2) * x2 + pba%rw(:, 3) * x3, pb(nd_brad, k) * tr%sb, &
+                         tr%lo, tr%hi)
+      if (.not. live) return
+      x1 = pb(nd_c, k)
+      x2 = pb(nd_c + 1, k)
+      x3 = pb(nd_c + 2, k)
+      c = pba%m(:, 1) * x1 + pba%m(:, 2) * x2 + pba%m(:, 3) * x3 + pba%t
+      call ball_cone(c, pba%k * pb(nd_r, k) * (1.0_wp + 1.0e-12_wp), nd%u, nd%sinb, nd%cosb, nd%cone)
    end subroutine make_b_node
 
    !> Cone from the origin holding the ball (c, r): axis u, sin and cos of the half-angle
@@ -1006,20 +1024,21 @@ contains
    end subroutine ball_cone
 
    !> True when A's patch na and B's patch y are separated: cones, containing balls, boxes.
-   pure logical function patches_apart(a, b, na, y) result(apart)
-      type(contact_body_type), intent(in) :: a, b
+   pure logical function patches_apart(pa, pb, na, y) result(apart)
+      real(wp), intent(in) :: pa(node_size, *), pb(node_size, *)
       type(a_node_type), intent(in) :: na
       type(b_node_type), intent(in) :: y
       integer :: k
       apart = .true.
       k = y%k
       if (na%cone) then
-         if (cones_apart(na%u, na%sinb, na%cosb, b%dir(:, k), b%cosa(k), b%sina(k))) return
+         if (cones_apart(na%u, na%sinb, na%cosb, pb(nd_dir:nd_dir + 2, k), pb(nd_cosa, k), pb(nd_sina, k))) return
       end if
       if (y%cone) then
-         if (cones_apart(y%u, y%sinb, y%cosb, a%dir(:, na%k), a%cosa(na%k), a%sina(na%k))) return
+         if (cones_apart(y%u, y%sinb, y%cosb, pa(nd_dir:nd_dir + 2, na%k), pa(nd_cosa, na%k), pa(nd_sina, na%k))) return
       end if
-      apart = boxes_disjoint(na%c, na%e, na%h, na%r, b%obb_c(:, k), b%obb_e(:, :, k), b%obb_h(:, k), b%obb_r(k))
+      apart = boxes_disjoint(na%c, na%e, na%h, na%r, pb(nd_c:nd_c + 2, k), pb(nd_e:nd_e + 8, k), pb(nd_h:nd_h + 2, k), &
+                             pb(nd_r, k))
    end function patches_apart
 
    !> True when the cone (u, sinb, cosb) (half-angle beta <= pi/2) misses the cap (dir, cosa,
@@ -1038,49 +1057,60 @@ contains
    pure logical function boxes_disjoint(c1, e1, h1, r1, c2, e2, h2, r2) result(sep)
       real(wp), intent(in) :: c1(3), e1(3, 3), h1(3), r1, c2(3), e2(3, 3), h2(3), r2
       real(wp), parameter :: eps = 1.0e-12_wp
-      real(wp) :: r(3, 3), ar(3, 3), t(3), d(3), ra, rb, tol, dd
-      integer :: i, j, i1, i2, j1, j2
+      real(wp) :: dx, dy, dz, dd, tol, t1, t2, t3, s1, s2, s3
+      real(wp) :: r11, r12, r13, r21, r22, r23, r31, r32, r33
+      real(wp) :: a11, a12, a13, a21, a22, a23, a31, a32, a33
       sep = .true.
-      d = c2 - c1
-      dd = d(1)**2 + d(2)**2 + d(3)**2
+      dx = c2(1) - c1(1)
+      dy = c2(2) - c1(2)
+      dz = c2(3) - c1(3)
+      dd = dx * dx + dy * dy + dz * dz
       if (dd > (r1 + r2)**2 * (1.0_wp + 4.0_wp * eps)) return
       tol = eps * (r1 + r2 + sqrt(dd))
-      ! normal of box 2
-      do i = 1, 3
-         r(i, 3) = e1(1, i) * e2(1, 3) + e1(2, i) * e2(2, 3) + e1(3, i) * e2(3, 3)
-      end do
-      if (abs(d(1) * e2(1, 3) + d(2) * e2(2, 3) + d(3) * e2(3, 3)) > &
-          h2(3) + h1(1) * abs(r(1, 3)) + h1(2) * abs(r(2, 3)) + h1(3) * abs(r(3, 3)) + tol) return
-      do j = 1, 2
-         do i = 1, 3
-            r(i, j) = e1(1, i) * e2(1, j) + e1(2, i) * e2(2, j) + e1(3, i) * e2(3, j)
-         end do
-      end do
-      ar = abs(r) + eps
-      do i = 1, 3
-         t(i) = d(1) * e1(1, i) + d(2) * e1(2, i) + d(3) * e1(3, i)
-      end do
-      ! faces of box 1 (normal first), then the other faces of box 2
-      if (abs(t(3)) > h1(3) + h2(1) * ar(3, 1) + h2(2) * ar(3, 2) + h2(3) * ar(3, 3) + tol) return
-      do i = 1, 2
-         if (abs(t(i)) > h1(i) + h2(1) * ar(i, 1) + h2(2) * ar(i, 2) + h2(3) * ar(i, 3) + tol) return
-      end do
-      do j = 1, 2
-         if (abs(t(1) * r(1, j) + t(2) * r(2, j) + t(3) * r(3, j)) > &
-             h2(j) + h1(1) * ar(1, j) + h1(2) * ar(2, j) + h1(3) * ar(3, j) + tol) return
-      end do
-      ! edge-edge axes e1_i x e2_j
-      do i = 1, 3
-         i1 = mod(i, 3) + 1
-         i2 = mod(i + 1, 3) + 1
-         do j = 1, 3
-            j1 = mod(j, 3) + 1
-            j2 = mod(j + 1, 3) + 1
-            ra = h1(i1) * ar(i2, j) + h1(i2) * ar(i1, j)
-            rb = h2(j1) * ar(i, j2) + h2(j2) * ar(i, j1)
-            if (abs(t(i2) * r(i1, j) - t(i1) * r(i2, j)) > ra + rb + tol) return
-         end do
-      end do
+      ! normal of box 2: r_i3 = e1_i . e2_3
+      r13 = e1(1, 1) * e2(1, 3) + e1(2, 1) * e2(2, 3) + e1(3, 1) * e2(3, 3)
+      r23 = e1(1, 2) * e2(1, 3) + e1(2, 2) * e2(2, 3) + e1(3, 2) * e2(3, 3)
+      r33 = e1(1, 3) * e2(1, 3) + e1(2, 3) * e2(2, 3) + e1(3, 3) * e2(3, 3)
+      s3 = dx * e2(1, 3) + dy * e2(2, 3) + dz * e2(3, 3)
+      if (abs(s3) > h2(3) + h1(1) * abs(r13) + h1(2) * abs(r23) + h1(3) * abs(r33) + tol) return
+      ! normal of box 1
+      r31 = e1(1, 3) * e2(1, 1) + e1(2, 3) * e2(2, 1) + e1(3, 3) * e2(3, 1)
+      r32 = e1(1, 3) * e2(1, 2) + e1(2, 3) * e2(2, 2) + e1(3, 3) * e2(3, 2)
+      t3 = dx * e1(1, 3) + dy * e1(2, 3) + dz * e1(3, 3)
+      a31 = abs(r31) + eps
+      a32 = abs(r32) + eps
+      a33 = abs(r33) + eps
+      if (abs(t3) > h1(3) + h2(1) * a31 + h2(2) * a32 + h2(3) * a33 + tol) return
+      ! the other faces
+      r11 = e1(1, 1) * e2(1, 1) + e1(2, 1) * e2(2, 1) + e1(3, 1) * e2(3, 1)
+      r12 = e1(1, 1) * e2(1, 2) + e1(2, 1) * e2(2, 2) + e1(3, 1) * e2(3, 2)
+      r21 = e1(1, 2) * e2(1, 1) + e1(2, 2) * e2(2, 1) + e1(3, 2) * e2(3, 1)
+      r22 = e1(1, 2) * e2(1, 2) + e1(2, 2) * e2(2, 2) + e1(3, 2) * e2(3, 2)
+      a11 = abs(r11) + eps
+      a12 = abs(r12) + eps
+      a13 = abs(r13) + eps
+      a21 = abs(r21) + eps
+      a22 = abs(r22) + eps
+      a23 = abs(r23) + eps
+      t1 = dx * e1(1, 1) + dy * e1(2, 1) + dz * e1(3, 1)
+      t2 = dx * e1(1, 2) + dy * e1(2, 2) + dz * e1(3, 2)
+      if (abs(t1) > h1(1) + h2(1) * a11 + h2(2) * a12 + h2(3) * a13 + tol) return
+      if (abs(t2) > h1(2) + h2(1) * a21 + h2(2) * a22 + h2(3) * a23 + tol) return
+      s1 = t1 * r11 + t2 * r21 + t3 * r31
+      s2 = t1 * r12 + t2 * r22 + t3 * r32
+      if (abs(s1) > h2(1) + h1(1) * a11 + h1(2) * a21 + h1(3) * a31 + tol) return
+      if (abs(s2) > h2(2) + h1(1) * a12 + h1(2) * a22 + h1(3) * a32 + tol) return
+      ! edge-edge axes e1_i x e2_j: |t_i2 r_i1j - t_i1 r_i2j| > h1_i1 a_i2j + h1_i2 a_i1j
+      ! + h2_j1 a_ij2 + h2_j2 a_ij1, (i, i1, i2) and (j, j1, j2) cyclic
+      if (abs(t3 * r21 - t2 * r31) > h1(2) * a31 + h1(3) * a21 + h2(2) * a13 + h2(3) * a12 + tol) return
+      if (abs(t3 * r22 - t2 * r32) > h1(2) * a32 + h1(3) * a22 + h2(3) * a11 + h2(1) * a13 + tol) return
+      if (abs(t3 * r23 - t2 * r33) > h1(2) * a33 + h1(3) * a23 + h2(1) * a12 + h2(2) * a11 + tol) return
+      if (abs(t1 * r31 - t3 * r11) > h1(3) * a11 + h1(1) * a31 + h2(2) * a23 + h2(3) * a22 + tol) return
+      if (abs(t1 * r32 - t3 * r12) > h1(3) * a12 + h1(1) * a32 + h2(3) * a21 + h2(1) * a23 + tol) return
+      if (abs(t1 * r33 - t3 * r13) > h1(3) * a13 + h1(1) * a33 + h2(1) * a22 + h2(2) * a21 + tol) return
+      if (abs(t2 * r11 - t1 * r21) > h1(1) * a21 + h1(2) * a11 + h2(2) * a33 + h2(3) * a32 + tol) return
+      if (abs(t2 * r12 - t1 * r22) > h1(1) * a22 + h1(2) * a12 + h2(3) * a31 + h2(1) * a33 + tol) return
+      if (abs(t2 * r13 - t1 * r23) > h1(1) * a23 + h1(2) * a13 + h2(1) * a32 + h2(2) * a31 + tol) return
       sep = .false.
    end function boxes_disjoint
 
