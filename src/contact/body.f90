@@ -70,6 +70,8 @@ module anm_contact_body
       real(wp) :: lipschitz = 0.0_wp
       !> Certified bound of |d2r/ds2| along great circles, N^2 M.
       real(wp) :: curvature = 0.0_wp
+      !> Certified bound of |d3r/ds3| along great circles, N^3 M.
+      real(wp) :: third = 0.0_wp
       !> Guaranteed extent box (body frame): every surface point lies inside [box_lo, box_hi].
       real(wp) :: box_lo(3) = 0.0_wp, box_hi(3) = 0.0_wp
       !> Thesis extent box from the N_ext angular scan (slightly inside the true box).
@@ -247,9 +249,10 @@ contains
       integer, intent(in), optional :: nused
       !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
       integer, intent(in), optional :: next
-      real(wp), allocatable :: rg(:, :), gg(:, :), rt(:, :), rp(:, :), clo(:, :), chi(:, :), dcr(:)
+      real(wp), allocatable :: rg(:, :), gg(:, :), rt(:, :), rp(:, :), clo(:, :), chi(:, :), dcr(:), h11(:, :), &
+                               h12(:, :), h22(:, :), qhi(:, :), qlo(:, :)
       integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc, nd
-      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu, d3(3)
+      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu, d3(3), margin
       real(wp) :: e(3)
 
       if (present(nused)) then
@@ -266,9 +269,13 @@ contains
       npg = cells_per_leaf * nleaf_p
       dth = pi / ntg
       dph = two_pi / npg
-      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg), rt(0:ntg, 0:npg), rp(0:ntg, 0:npg))
-      call synthesize_regular(body%shape, ntg, npg, rg, rt, rp)
+      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg), rt(0:ntg, 0:npg), rp(0:ntg, 0:npg), h11(0:ntg, 0:npg), &
+                h12(0:ntg, 0:npg), h22(0:ntg, 0:npg))
+      call synthesize_regular(body%shape, ntg, npg, rg, rt, rp, h11, h12, h22)
       gg = sqrt(rt**2 + rp**2)
+      ! largest and smallest eigenvalue of the Hessian, clipped at 0
+      qhi = max(0.0_wp, 0.5_wp * (h11 + h22) + sqrt((0.5_wp * (h11 - h22))**2 + h12**2))
+      qlo = min(0.0_wp, 0.5_wp * (h11 + h22) - sqrt((0.5_wp * (h11 - h22))**2 + h12**2))
       smin = minval(rg)
       smax = maxval(rg)
       ms = 0.5_wp * (smax - smin)
@@ -282,7 +289,12 @@ contains
       if (n == 0) mm = 0.0_wp
       body%lipschitz = n * mm
       body%curvature = real(n, wp)**2 * mm
-      ! cell bounds
+      ! cell bounds: first order with the Bernstein curvature H; for cells not touching a pole
+      ! also second order, r <= max_k (r_k + |grad r_k| d + max(lambda_max,k, 0) d^2/2) + T d^3/6
+      ! with the sampled Hessian's eigenvalues and T = N^3 M >= |r'''| (Bernstein); the tighter
+      ! of the two is kept
+      body%third = real(n, wp)**3 * mm
+      margin = 1.0e-11_wp * smax
       allocate (clo(ntg, npg), chi(ntg, npg), dcr(ntg))
       do ic = 1, ntg
          if ((ic - 1) * dth <= 0.5_wp * pi .and. ic * dth >= 0.5_wp * pi) then
@@ -299,6 +311,18 @@ contains
                      rg(ic - 1, jc) - gg(ic - 1, jc) * dc, rg(ic, jc) - gg(ic, jc) * dc)
             chi(ic, jc) = hi + 0.5_wp * body%curvature * dc**2
             clo(ic, jc) = lo - 0.5_wp * body%curvature * dc**2
+            if (ic > 1 .and. ic < ntg) then
+               hi = max(rg(ic - 1, jc - 1) + gg(ic - 1, jc - 1) * dc + 0.5_wp * qhi(ic - 1, jc - 1) * dc**2, &
+                        rg(ic, jc - 1) + gg(ic, jc - 1) * dc + 0.5_wp * qhi(ic, jc - 1) * dc**2, &
+                        rg(ic - 1, jc) + gg(ic - 1, jc) * dc + 0.5_wp * qhi(ic - 1, jc) * dc**2, &
+                        rg(ic, jc) + gg(ic, jc) * dc + 0.5_wp * qhi(ic, jc) * dc**2)
+               lo = min(rg(ic - 1, jc - 1) - gg(ic - 1, jc - 1) * dc + 0.5_wp * qlo(ic - 1, jc - 1) * dc**2, &
+                        rg(ic, jc - 1) - gg(ic, jc - 1) * dc + 0.5_wp * qlo(ic, jc - 1) * dc**2, &
+                        rg(ic - 1, jc) - gg(ic - 1, jc) * dc + 0.5_wp * qlo(ic - 1, jc) * dc**2, &
+                        rg(ic, jc) - gg(ic, jc) * dc + 0.5_wp * qlo(ic, jc) * dc**2)
+               chi(ic, jc) = min(chi(ic, jc), hi + body%third * dc**3 / 6.0_wp + margin)
+               clo(ic, jc) = max(clo(ic, jc), lo - body%third * dc**3 / 6.0_wp - margin)
+            end if
          end do
       end do
       ! deep levels: bounds only, rounded outwards to single precision
@@ -406,31 +430,38 @@ contains
             end do
          end do
       end do
-      call surface_boxes(body, ntg, npg, rg, rt, rp, dcr)
+      call surface_boxes(body, ntg, npg, rg, rt, rp, h11, h12, h22, dcr)
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body
 
    !> Oriented boxes of the surface pieces of the patches of levels 0..leaf_level. The frame of a
    !> patch is the surface normal n at its centre (a grid point) and two tangents. For a unit
    !> vector e, f(u) = e . (r(u) u) restricted to a unit-speed great circle is f = r w with
-   !> w = e . u, w'' = -w and w^2 + w'^2 <= 1, so f'' = (r'' - r) w + 2 r' w' and
-   !>     |f''| <= H_f = sqrt((H + r_max)^2 + 4 G^2)
-   !> (Cauchy-Schwarz, with the Bernstein bounds G >= |r'|, H >= |r''|). As for r, every point of a
-   !> grid cell is within d_c of a corner k along a great circle, so over the cell
-   !>     f <= max_k (f_k + |grad f_k| d_c) + H_f d_c^2/2   (and symmetrically for the minimum),
-   !> with grad f = (e . x_theta, e . x_phi / sin theta), x_theta = r_theta u + r e_theta,
-   !> x_phi / sin theta = (r_phi / sin theta) u + r e_phi. Leaf patches take these bounds over
-   !> their grid points; coarser patches bound the boxes of their four children along their own
-   !> axes. Rounding margins of 1e-11 r_max are added.
-   pure subroutine surface_boxes(body, ntg, npg, rg, rt, rp, dcr)
+   !> w = e . u, w'' = -w and w^2 + w'^2 <= 1, so (Cauchy-Schwarz, with the Bernstein bounds
+   !> G >= |r'|, H >= |r''|, T >= |r'''|)
+   !>     f'' = (r'' - r) w + 2 r' w',              |f''| <= H_f = sqrt((H + r_max)^2 + 4 G^2),
+   !>     f''' = (r''' - 3 r') w + (3 r'' - r) w',  |f'''| <= T_f = sqrt((T + 3 G)^2 + (3 H + r_max)^2).
+   !> Every point of a grid cell is within d_c of a corner k along a great circle, so over the cell
+   !>     f <= max_k (f_k + |grad f_k| d_c) + H_f d_c^2/2   (first order), and
+   !>     f <= max_k (f_k + |grad f_k| d_c + max(lambda_max(Hess f_k), 0) d_c^2/2) + T_f d_c^3/6
+   !> (second order, patches off the poles), symmetrically for the minimum; the tighter is kept.
+   !> In the frame (e_theta, e_phi), with g = (r_theta, r_phi/sin theta) and h the covariant
+   !> Hessian of r: grad f_i = g_i (e . u) + r (e . e_i) and
+   !>     Hess f_ij = (h_ij - r delta_ij)(e . u) + g_i (e . e_j) + g_j (e . e_i).
+   !> Leaf patches take these bounds over their grid points; coarser patches bound the boxes of
+   !> their four children along their own axes. Rounding margins of 1e-11 r_max are added.
+   pure subroutine surface_boxes(body, ntg, npg, rg, rt, rp, h11, h12, h22, dcr)
       type(contact_body_type), intent(inout) :: body
       integer, intent(in) :: ntg, npg
-      !> r, dr/dtheta and (dr/dphi)/sin(theta) on the grid; d_c per cell row.
-      real(wp), intent(in) :: rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), dcr(:)
+      !> r, its gradient (dr/dtheta, (dr/dphi)/sin(theta)), its covariant Hessian on the grid;
+      !> d_c per cell row.
+      real(wp), intent(in) :: rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), h11(0:, 0:), h12(0:, 0:), h22(0:, 0:), dcr(:)
       real(wp), allocatable :: st(:), ct(:), sp(:), cp(:)
-      real(wp) :: hf, d, e(3, 3), lo(3), hi(3), x(3), xt(3), xp(3), eph(3), f, g, pc, pr, margin
+      real(wp) :: hf, tf, d, e(3, 3), lo(3), hi(3), lo2(3), hi2(3), x(3), xt(3), xp(3), eph(3), pc, pr, margin
+      real(wp) :: u(3), et(3), ep(3), eu, eet, eep, g1, g2, g, a11, a12, a22, am, ar, r
       real(wp), allocatable :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
       integer :: l, i, j, k, kc, ig, jg, i0, j0, m, di, dj, kch, np
+      logical :: second
       allocate (st(0:ntg), ct(0:ntg), sp(0:npg), cp(0:npg))
       do ig = 0, ntg
          st(ig) = sin(pi * ig / ntg)
@@ -441,6 +472,7 @@ contains
          cp(jg) = cos(two_pi * mod(jg, npg) / npg)
       end do
       hf = sqrt((body%curvature + body%r_max)**2 + 4.0_wp * body%lipschitz**2)
+      tf = sqrt((body%third + 3.0_wp * body%lipschitz)**2 + (3.0_wp * body%curvature + body%r_max)**2)
       margin = 1.0e-11_wp * body%r_max
       np = body%off(leaf_level + 1)
       allocate (obb_c(3, np), obb_e(3, 3, np), obb_h(3, np), body%node(node_size, np))
@@ -466,19 +498,42 @@ contains
                   i0 = (i - 1) * kc
                   j0 = (j - 1) * kc
                   d = maxval(dcr(i0 + 1:i0 + kc))
+                  second = i0 > 0 .and. i0 + kc < ntg
+                  lo2 = huge(1.0_wp)
+                  hi2 = -huge(1.0_wp)
                   do jg = j0, j0 + kc
                      do ig = i0, i0 + kc
-                        call grid_point(ig, jg, x, xt, xp)
+                        u = [st(ig) * cp(jg), st(ig) * sp(jg), ct(ig)]
+                        et = [ct(ig) * cp(jg), ct(ig) * sp(jg), -st(ig)]
+                        ep = [-sp(jg), cp(jg), 0.0_wp]
+                        r = rg(ig, jg)
                         do m = 1, 3
-                           f = dot_product(e(:, m), x)
-                           g = sqrt(dot_product(e(:, m), xt)**2 + dot_product(e(:, m), xp)**2)
-                           lo(m) = min(lo(m), f - g * d)
-                           hi(m) = max(hi(m), f + g * d)
+                           eu = dot_product(e(:, m), u)
+                           eet = dot_product(e(:, m), et)
+                           eep = dot_product(e(:, m), ep)
+                           g1 = rt(ig, jg) * eu + r * eet
+                           g2 = rp(ig, jg) * eu + r * eep
+                           g = sqrt(g1**2 + g2**2)
+                           lo(m) = min(lo(m), r * eu - g * d)
+                           hi(m) = max(hi(m), r * eu + g * d)
+                           if (second) then
+                              a11 = (h11(ig, jg) - r) * eu + 2.0_wp * rt(ig, jg) * eet
+                              a12 = h12(ig, jg) * eu + rt(ig, jg) * eep + rp(ig, jg) * eet
+                              a22 = (h22(ig, jg) - r) * eu + 2.0_wp * rp(ig, jg) * eep
+                              am = 0.5_wp * (a11 + a22)
+                              ar = sqrt((0.5_wp * (a11 - a22))**2 + a12**2)
+                              lo2(m) = min(lo2(m), r * eu - g * d + 0.5_wp * min(0.0_wp, am - ar) * d**2)
+                              hi2(m) = max(hi2(m), r * eu + g * d + 0.5_wp * max(0.0_wp, am + ar) * d**2)
+                           end if
                         end do
                      end do
                   end do
                   lo = lo - 0.5_wp * hf * d**2
                   hi = hi + 0.5_wp * hf * d**2
+                  if (second) then
+                     lo = max(lo, lo2 - tf * d**3 / 6.0_wp)
+                     hi = min(hi, hi2 + tf * d**3 / 6.0_wp)
+                  end if
                else
                   do dj = 0, 1
                      do di = 0, 1
@@ -530,24 +585,28 @@ contains
       c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
    end function cross
 
-   !> r and its angular derivatives on the regular grid theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np
-   !> (j = 0..np, column np repeating column 0): per ring the sums over degree, then per azimuth
-   !> the sums over order with a cos/sin table.
-   pure subroutine synthesize_regular(shape, nt, np, r, rt, rp)
+   !> r and its angular derivatives on the regular grid theta_i = i pi/nt (i = 0..nt),
+   !> phi_j = 2 pi j/np (j = 0..np, column np repeating column 0): per ring the sums over degree,
+   !> then per azimuth the sums over order with a cos/sin table. Outputs r, the gradient in the
+   !> orthonormal frame (e_theta, e_phi), (dr/dtheta, (dr/dphi)/sin theta), and the covariant
+   !> Hessian in that frame, h11 = r_theta,theta, h12 = (r_theta,phi - cot(theta) r_phi)/sin theta,
+   !> h22 = r_phi,phi/sin^2 theta + cot(theta) r_theta (zero on the pole rows i = 0, nt); the
+   !> Legendre equation gives h11 + h22 = -sum n(n+1) a_nm Y_nm.
+   pure subroutine synthesize_regular(shape, nt, np, r, rt, rp, h11, h12, h22)
       type(sh_expansion_type), intent(in) :: shape
       integer, intent(in) :: nt, np
-      !> r, dr/dtheta and (dr/dphi)/sin(theta).
-      real(wp), intent(out) :: r(0:nt, 0:np), rt(0:nt, 0:np), rp(0:nt, 0:np)
+      real(wp), intent(out) :: r(0:nt, 0:np), rt(0:nt, 0:np), rp(0:nt, 0:np), h11(0:nt, 0:np), h12(0:nt, 0:np), &
+                               h22(0:nt, 0:np)
       real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :)
-      real(wp), allocatable :: ca(:), cb(:), da(:), db(:), ea(:), eb(:)
+      real(wp), allocatable :: ca(:), cb(:), da(:), db(:), ea(:), eb(:), la(:), lb(:)
       integer, allocatable :: idx_out(:)
       integer :: nmax, i, j, m, n, k
-      real(wp) :: th, vr, vt, vp
+      real(wp) :: th, vr, vt, vp, vl, vpp, vtp, st, ct, q
 
       nmax = shape%nmax
       allocate (p(packed_size(nmax + 1)), dp(packed_size(nmax)), mps(packed_size(nmax)), idx_out(0:nmax))
       allocate (cs(0:nmax, 0:np), sn(0:nmax, 0:np), ca(0:nmax), cb(0:nmax), da(0:nmax), db(0:nmax), &
-                ea(0:nmax), eb(0:nmax))
+                ea(0:nmax), eb(0:nmax), la(0:nmax), lb(0:nmax))
       k = 1
       do m = 0, nmax
          idx_out(m) = k
@@ -561,7 +620,9 @@ contains
       end do
       do i = 0, nt
          th = pi * i / nt
-         call legendre_values(shape%table, cos(th), p, sin(th))
+         st = sin(th)
+         ct = cos(th)
+         call legendre_values(shape%table, ct, p, st)
          call legendre_theta_derivatives(shape%table, p, nmax, idx_out, dp, mps)
          do m = 0, nmax
             ca(m) = 0.0_wp
@@ -570,9 +631,14 @@ contains
             db(m) = 0.0_wp
             ea(m) = 0.0_wp
             eb(m) = 0.0_wp
+            la(m) = 0.0_wp
+            lb(m) = 0.0_wp
             do n = m, nmax
-               ca(m) = ca(m) + shape%a(n, m) * p(shape%table%idx(m) + n - m)
-               cb(m) = cb(m) + shape%b(n, m) * p(shape%table%idx(m) + n - m)
+               q = p(shape%table%idx(m) + n - m)
+               ca(m) = ca(m) + shape%a(n, m) * q
+               cb(m) = cb(m) + shape%b(n, m) * q
+               la(m) = la(m) + shape%a(n, m) * (n * (n + 1) * q)
+               lb(m) = lb(m) + shape%b(n, m) * (n * (n + 1) * q)
                da(m) = da(m) + shape%a(n, m) * dp(idx_out(m) + n - m)
                db(m) = db(m) + shape%b(n, m) * dp(idx_out(m) + n - m)
                ea(m) = ea(m) + shape%a(n, m) * mps(idx_out(m) + n - m)
@@ -583,14 +649,30 @@ contains
             vr = 0.0_wp
             vt = 0.0_wp
             vp = 0.0_wp
+            vl = 0.0_wp
+            vpp = 0.0_wp
+            vtp = 0.0_wp
             do m = 0, nmax
                vr = vr + ca(m) * cs(m, j) + cb(m) * sn(m, j)
                vt = vt + da(m) * cs(m, j) + db(m) * sn(m, j)
                vp = vp + eb(m) * cs(m, j) - ea(m) * sn(m, j)
+               vl = vl + la(m) * cs(m, j) + lb(m) * sn(m, j)
+               vpp = vpp + m * (ea(m) * cs(m, j) + eb(m) * sn(m, j))
+               vtp = vtp + m * (db(m) * cs(m, j) - da(m) * sn(m, j))
             end do
             r(i, j) = vr
             rt(i, j) = vt
             rp(i, j) = vp
+            if (i == 0 .or. i == nt) then
+               h11(i, j) = 0.0_wp
+               h12(i, j) = 0.0_wp
+               h22(i, j) = 0.0_wp
+            else
+               ! r_phi,phi / sin^2 = -sum m (m A_m / sin) (cos, sin) / sin; r_theta,phi / sin likewise
+               h22(i, j) = (-vpp + ct * vt) / st
+               h11(i, j) = -vl - h22(i, j)
+               h12(i, j) = (vtp - ct * vp) / st
+            end if
          end do
       end do
    end subroutine synthesize_regular
