@@ -44,7 +44,7 @@ module anm_contact_overlap
    private
 
    public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
-      & point_inside, sector_range
+      & point_inside, sector_range, boxes_disjoint
 
    !> Contact methods.
    type :: contact_method_enum
