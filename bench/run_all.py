@@ -107,12 +107,51 @@ def block(title: str, cmd: str, text: str, note: str = "") -> str:
     return out + "```\n" + body + "\n```\n"
 
 
-def fpm_bench(rep: Report, name: str, title: str, anm_flags: str, args: str = "") -> None:
+def fpm_bench(rep: Report, name: str, title: str, anm_flags: str, args: str = "") -> str:
     cmd = f'OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" {name} {args}'.strip()
     r = sh(f"fpm run --profile release --flag {shlex.quote(anm_flags)} {name} {args} 2>/dev/null",
            env={"OMP_NUM_THREADS": "1"})
     text = r.stdout if r.rc == 0 else r.stdout + "\n(exit code %d)\n" % r.rc + r.stderr[-2000:]
     rep.sections.append(block(title, cmd, text))
+    return text if r.rc == 0 else ""
+
+
+def sh_targets(rep: Report, text: str) -> None:
+    m = re.search(r"grid 120x240 degree 14: r only\s+([\d.]+) ms", text)
+    if m:
+        v = float(m.group(1))
+        rep.target("SH synthesis, 120 x 240 grid, degree 14, 1 thread", f"{v:.3f} ms", "<= 0.3 ms", v <= 0.3)
+
+
+def shells_targets(rep: Report, text: str) -> None:
+    cpu, wall = [], []
+    for line in text.splitlines():
+        f = line.split()
+        if line.startswith("#") or len(f) < 4 or f[1] == "layers":
+            continue
+        try:
+            wall.append(float(f[2]))
+            cpu.append(float(f[3]))
+        except ValueError:
+            continue
+    if cpu:
+        rep.target(f"shell construction, degree 14, 120-point grid, 1 thread: slowest of {len(cpu)} shells "
+                   "(0.1 / 2 / 10 % L)", f"{max(cpu):.1f} ms CPU ({max(wall):.1f} ms wall)", "<= 20 ms",
+                   max(cpu) <= 20)
+
+
+def contact_targets(rep: Report, text: str) -> None:
+    degree = None
+    for line in text.splitlines():
+        m = re.match(r"# contact, degree (\d+)", line)
+        if m:
+            degree = int(m.group(1))
+            continue
+        m = re.match(r"\s+(.*?)\s+EOB\s+([\d.]+)\s+[\d.]+\s+hits\s+\d+\s+certified\s+([\d.]+)", line)
+        if m and degree == 14 and m.group(1).startswith("near"):
+            eob, cert = float(m.group(2)), float(m.group(3))
+            rep.target("contact, near-but-not-touching pairs, degree 14: median EOB / certified",
+                       f"{eob:.1f} / {cert:.1f} us", "<= 20 us", max(eob, cert) <= 20)
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,13 +391,14 @@ def main() -> int:
     try:
         if "sh" in which:
             print("== bench-sh", file=sys.stderr)
-            fpm_bench(rep, "bench-sh", "Spherical-harmonic synthesis (`bench-sh`)", flags)
+            sh_targets(rep, fpm_bench(rep, "bench-sh", "Spherical-harmonic synthesis (`bench-sh`)", flags))
         if "shells" in which:
             print("== bench-shells", file=sys.stderr)
-            fpm_bench(rep, "bench-shells", "Shell construction (`bench-shells`)", flags)
+            shells_targets(rep, fpm_bench(rep, "bench-shells", "Shell construction (`bench-shells`)", flags))
         if "contact" in which:
             print("== bench-contact", file=sys.stderr)
-            fpm_bench(rep, "bench-contact", "Contact per pair, EOB and Newton-Raphson (`bench-contact`)", flags)
+            contact_targets(rep, fpm_bench(rep, "bench-contact",
+                                           "Contact per pair, EOB and Newton-Raphson (`bench-contact`)", flags))
         if which & {"default", "msand", "table23", "million", "rsa"}:
             print("== parking", file=sys.stderr)
             parking_section(rep, args.anm, tmp, which)
