@@ -27,10 +27,16 @@ contains
               new_unittest("cell list equals brute force, periodic, sizes 1000:1", test_cells_periodic), &
               new_unittest("cell list equals brute force, walls", test_cells_walls), &
               new_unittest("cell list finds all images in a small periodic box", test_cells_images), &
+              new_unittest("neighbours: candidates, certain overlaps, id range = brute force, periodic", &
+                           test_neighbours_periodic), &
+              new_unittest("neighbours: candidates, certain overlaps, id range = brute force, walls", test_neighbours_walls), &
+              new_unittest("neighbours: all images in a small periodic box", test_neighbours_images), &
               new_unittest("verify: separated spheres pass", test_verify_clear), &
               new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
               new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
               new_unittest("verify: a particle through a wall fails", test_verify_wall), &
+              new_unittest("verify: pruned sampling gives the report of every sample (sizes 8:1)", &
+                           test_verify_pruning), &
               new_unittest("RSA of spheres approaches saturation (>= 0.36)", test_rsa_spheres), &
               new_unittest("synthetic mortar reaches every target within 1 % and verifies", test_small_job), &
               new_unittest("walls: particles stay inside and verify passes", test_walls_job), &
@@ -39,6 +45,7 @@ contains
               new_unittest("an unreadable shape folder names the variable", test_bad_source), &
               new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes), &
               new_unittest("1 and 2 threads give the same model", test_threads), &
+              new_unittest("batches give the serial model (dense spheres, shapes with shells)", test_batches), &
               new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void), &
               new_unittest("max_failures: the thesis' model is a prefix, more particles follow", test_max_failures), &
               new_unittest("rounding of a sieve moves to the next: total within half a grain", test_carry)]
@@ -92,6 +99,89 @@ contains
          if (allocated(error)) return
       end do
    end subroutine run_case
+
+   !> `neighbours` against brute force: with rin absent, the candidates (jmin < id <= jmax) are the
+   !> particles (and images) whose bounding spheres meet the query's; with rin, `hit` is true
+   !> exactly when one of them lies closer than rin + rin_j, and otherwise the candidates are
+   !> complete. Radii log-uniform over rmin..rmax, inscribed radii a random 30-100 % of them.
+   subroutine neighbours_case(error, periodic, box, rmin, rmax, n, nq)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      real(wp), intent(in) :: box(3), rmin, rmax
+      integer, intent(in) :: n, nq
+      type(cell_list_type) :: cl
+      type(rng_type) :: rng
+      real(wp), allocatable :: c(:, :), rho(:), rin(:), shift(:, :)
+      integer, allocatable :: cand(:)
+      real(wp) :: q(3), rq, qin, d(3), lim, lin, r2
+      integer :: i, k, ncand, nbrute, s1, s2, s3, hits, jmin, jmax, nin
+      logical :: hit
+      call new_rng(rng, 13_i8, 0_i8)
+      allocate (c(3, n), rho(n), rin(n))
+      call new_cell_list(cl, box, periodic, rmin)
+      do i = 1, n
+         c(:, i) = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rho(i) = rmin * (rmax / rmin)**rng%uniform()
+         rin(i) = rho(i) * (0.3_wp + 0.7_wp * rng%uniform())
+         call cl%insert(i, c(:, i), rho(i), rin=rin(i))
+      end do
+      do k = 1, nq
+         q = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rq = rmin * (rmax / rmin)**rng%uniform()
+         qin = rq * (0.3_wp + 0.7_wp * rng%uniform())
+         jmin = merge(0, int(n * rng%uniform()), mod(k, 2) == 0)
+         jmax = merge(n, jmin + int((n - jmin) * rng%uniform()), mod(k, 3) /= 0)
+         nbrute = 0
+         nin = 0
+         do i = jmin + 1, jmax
+            lim = rq + rho(i)
+            lin = qin + rin(i)
+            d = c(:, i) - q
+            do s3 = -1, 1
+               do s2 = -1, 1
+                  do s1 = -1, 1
+                     if (.not. periodic .and. any([s1, s2, s3] /= 0)) cycle
+                     r2 = sum((d + [s1, s2, s3] * box)**2)
+                     if (r2 < lim * lim) nbrute = nbrute + 1
+                     if (r2 < lin * lin) nin = nin + 1
+                  end do
+               end do
+            end do
+         end do
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, jmin=jmin, jmax=jmax)
+         call check(error, ncand, nbrute, "candidates vs brute force")
+         if (allocated(error)) return
+         call check(error, .not. hit, "hit without rin")
+         if (allocated(error)) return
+         hits = 0
+         do i = 1, ncand
+            d = c(:, cand(i)) + shift(:, i) - q
+            if (sum(d**2) < (rq + rho(cand(i)))**2 .and. cand(i) > jmin .and. cand(i) <= jmax) hits = hits + 1
+         end do
+         call check(error, hits, ncand, "every candidate intersects, jmin < id <= jmax")
+         if (allocated(error)) return
+         call cl%neighbours(q, rq, cand, shift, ncand, hit, rin=qin, jmin=jmin, jmax=jmax)
+         call check(error, hit .eqv. nin > 0, "certain overlap found iff brute force has one")
+         if (allocated(error)) return
+         if (.not. hit) call check(error, ncand, nbrute, "candidates when no certain overlap")
+         if (allocated(error)) return
+      end do
+   end subroutine neighbours_case
+
+   subroutine test_neighbours_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .true., [20.0_wp, 20.0_wp, 20.0_wp], 0.005_wp, 5.0_wp, 3000, 800)
+   end subroutine test_neighbours_periodic
+
+   subroutine test_neighbours_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .false., [20.0_wp, 15.0_wp, 10.0_wp], 0.01_wp, 2.0_wp, 3000, 2000)
+   end subroutine test_neighbours_walls
+
+   subroutine test_neighbours_images(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .true., [4.0_wp, 4.0_wp, 4.0_wp], 0.5_wp, 1.5_wp, 50, 500)
+   end subroutine test_neighbours_images
 
    subroutine test_cells_periodic(error)
       type(error_type), allocatable, intent(out) :: error
@@ -172,10 +262,75 @@ contains
                                      [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
       call check(error, rep%wall_violations, 1, "wall crossing not found")
    end subroutine test_verify_wall
-   subroutine run_nml(name, text, model, error)
+   !> A parked model of synthetic shapes of two sizes (8:1), then the same with every particle
+   !> grown by 0.2 % and by 3 % (shallow and deeper overlaps): the block bounds must not change
+   !> the pairs, the count of overlaps, the worst pair or the deepest penetration.
+   subroutine test_verify_pruning(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: fast, full
+      real(wp), allocatable :: scale0(:)
+      integer :: k
+      real(wp), parameter :: grow(3) = [1.0_wp, 1.002_wp, 1.03_wp]
+      call run_nml("prune.nml", "&box length = 6, 6, 6 /"//new_line("a")// &
+                   "&sieves nsieve = 2, min_width = 2.0, 0.25, max_width = 2.4, 0.3, fraction = 0.15, 0.08, " &
+                   //"order = 10, 5 /"//new_line("a")//"&synthetic count = 4 /"//new_line("a")//"&run seed = 5 /", m, error)
+      if (allocated(error)) return
+      scale0 = m%scale
+      do k = 1, 3
+         m%scale = scale0 * grow(k)
+         call verify_model(m, 48, fast)
+         call verify_model(m, 48, full, prune=.false.)
+         print '(a,f6.3,a,i0,a,i0,a,es10.3)', "        scale x", grow(k), ": ", full%pairs_checked, " pairs, ", &
+            full%overlapping_pairs, " overlapping, deepest ", full%max_depth
+         call check(error, fast%pairs_checked == full%pairs_checked .and. &
+                    fast%overlapping_pairs == full%overlapping_pairs .and. all(fast%worst == full%worst), &
+                    "pruned report differs")
+         if (allocated(error)) return
+         call check(error, fast%max_depth, full%max_depth, "deepest penetration", thr=0.0_wp)
+         if (allocated(error)) return
+         call check(error, full%pairs_checked > 0_i8 .and. (k == 1 .or. full%overlapping_pairs > 0_i8), &
+                    "no pairs or overlaps to compare")
+         if (allocated(error)) return
+      end do
+   end subroutine test_verify_pruning
+
+   !> Batches of speculated particles (2 threads, phase 2 re-checks and continuations) against
+   !> the plain serial algorithm (one particle at a time): dense spheres in a small box, where
+   !> particles of a batch often meet, and a shaped mixture with shells.
+   subroutine test_batches(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: nthreads, k
+      character(len=*), parameter :: text(2) = [character(len=400) :: &
+         "&box length = 9, 9, 9 /"//new_line("a")//"&sieves nsieve = 1, min_width = 2, max_width = 2, " &
+         //"fraction = 0.34, source = 'sphere', order = 0 /"//new_line("a")//"&parking max_locations = 20000 /", &
+         "&box length = 7, 7, 7 /"//new_line("a")// &
+         "&sieves nsieve = 2, min_width = 1.5, 0.4, max_width = 1.8, 0.5, fraction = 0.1, 0.08, order = 8, 4 /" &
+         //new_line("a")//"&synthetic count = 4 /"//new_line("a")// &
+         "&shells nlayer = 1, thickness = 0.03, mode = 'exclude' /"//new_line("a")//"&run seed = 6 /"]
+      nthreads = omp_get_max_threads()
+      do k = 1, 2
+         call omp_set_num_threads(1)
+         call run_nml("serial.nml", trim(text(k)), a, error, max_batch=1)
+         call omp_set_num_threads(2)
+         if (.not. allocated(error)) call run_nml("batched.nml", trim(text(k)), b, error)
+         call omp_set_num_threads(nthreads)
+         if (allocated(error)) return
+         print '(a,i0,a,i0,a,i0,a)', "        case ", k, ": ", a%np, " particles, ", a%attempts, " attempts"
+         call check(error, a%np == b%np .and. a%attempts == b%attempts, "particle or attempt counts differ")
+         if (allocated(error)) return
+         call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. &
+                    all(a%scale == b%scale) .and. all(a%shape == b%shape), "batched model differs from the serial one")
+         if (allocated(error)) return
+      end do
+   end subroutine test_batches
+
+   subroutine run_nml(name, text, model, error, max_batch)
       character(len=*), intent(in) :: name, text
       type(model_type), intent(out) :: model
       type(error_type), allocatable, intent(out) :: error
+      integer, intent(in), optional :: max_batch
       type(run_config_type) :: cfg
       type(particle_kind_type), allocatable :: kinds(:)
       integer, allocatable :: kind_of(:)
@@ -186,7 +341,7 @@ contains
       close (unit)
       call read_config("build/test-tmp/"//name, cfg, error)
       if (allocated(error)) return
-      call run_parking(cfg, model, kinds, kind_of, error)
+      call run_parking(cfg, model, kinds, kind_of, error, max_batch=max_batch)
    end subroutine run_nml
 
    subroutine test_rsa_spheres(error)

@@ -6,30 +6,66 @@
 !> for a sphere (c, rho_q) visits, in each level, only the cells within rho_q + rho_max(level) of
 !> c: a few cells per level. A single uniform grid sized for the largest particles would put
 !> thousands of sand grains in each cell; one sized for the sand would make every aggregate span
-!> thousands of cells. Cost per query: O(levels + neighbours); memory: one integer per particle
-!> plus the cell heads (at most 2^24 cells per level; beyond that cells grow, which stays correct).
+!> thousands of cells. Cost per query: O(levels + neighbours); memory: about one 128-byte block per
+!> occupied cell plus one integer per cell of the levels in use (at most 2^24 cells per level;
+!> beyond that cells grow, which stays correct).
+!>
+!> Storage. A cell holds a chain of blocks of three records; a record is what a query touches of a
+!> particle: its centre, its bounding radius (rounded up to single precision), a radius within
+!> which another particle certainly overlaps it (rounded down) and its id. One query thus reads one
+!> or two cache lines per occupied cell instead of three scattered arrays per particle.
+!>
+!> Two queries:
+!> - `query` returns every particle whose bounding sphere, taken from the caller's arrays,
+!>   intersects the query sphere (cells in index order, the most recently inserted first);
+!> - `neighbours` reads the stored records, visits the levels from the coarsest and, inside a level,
+!>   the query's own cell first and then the cells outwards, and stops at the first particle
+!>   certainly overlapping the query (`hit`); otherwise it returns the candidates, whose bounding
+!>   spheres intersect the query's, for the exact contact tests.
 !>
 !> Periodic boxes: displacements use the nearest image; when rho_q + rho_j exceeds half an edge,
 !> every image within reach is returned.
 !>
 !> Usage:
 !>     call new_cell_list(cl, box, periodic, rho_min)
-!>     call cl%insert(i, center, rho)
+!>     call cl%insert(i, center, rho, rin)
+!>     call cl%neighbours(center, rho, cand, shift, ncand, hit, rin=rin_q, jmin=j0)
 !>     call cl%query(center, rho, centers, radii, cand, shift, ncand)
 module anm_parking_cell_list
-   use anm_core_kinds, only: wp
+   use anm_core_kinds, only: wp, sp
    implicit none
    private
 
    public :: cell_list_type, new_cell_list
 
    integer, parameter :: max_cells_per_level = 2**24
+   !> Records per block.
+   integer, parameter :: block_size = 3
+
+   !> What a query reads of a stored particle (40 bytes).
+   type :: cell_record_type
+      !> Centre.
+      real(wp) :: x(3) = 0.0_wp
+      !> Bounding radius (rounded up) and certain-overlap radius (rounded down).
+      real(sp) :: rho = 0.0_sp, rin = 0.0_sp
+      !> Particle id.
+      integer :: id = 0
+   end type cell_record_type
+
+   !> Up to block_size records of one cell and the next block of the cell (128 bytes: the count
+   !> and the first record share the first 48 bytes).
+   type :: cell_block_type
+      integer :: n = 0
+      integer :: next = 0
+      type(cell_record_type) :: r(block_size)
+   end type cell_block_type
 
    type :: cell_level_type
       real(wp) :: h(3) = 0.0_wp
       integer :: n(3) = 1
       real(wp) :: rho_max = 0.0_wp
       integer :: count = 0
+      !> First block of each cell (0: empty).
       integer, allocatable :: head(:)
    end type cell_level_type
 
@@ -42,13 +78,16 @@ module anm_parking_cell_list
       !> Smallest cell edge h_0.
       real(wp) :: h0 = 1.0_wp
       type(cell_level_type), allocatable :: levels(:)
-      !> Next particle in the same cell (0 ends a list), per particle.
-      integer, allocatable :: next(:)
+      !> Block pool, nblock of them in use.
+      type(cell_block_type), allocatable :: blocks(:)
+      integer :: nblock = 0
    contains
       !> Insert particle i.
       procedure :: insert
-      !> Particles whose bounding spheres intersect a query sphere.
+      !> Particles whose bounding spheres (caller's arrays) intersect a query sphere.
       procedure :: query
+      !> Candidates from the stored records, or the first certain overlap.
+      procedure :: neighbours
    end type cell_list_type
 
 contains
@@ -80,7 +119,7 @@ contains
       end do
       cap = 1024
       if (present(capacity)) cap = max(1, capacity)
-      allocate (cl%next(cap))
+      allocate (cl%blocks(max(16, cap / 2)))
    end subroutine new_cell_list
 
    pure integer function level_for(cl, rho) result(k)
@@ -122,8 +161,8 @@ contains
       end if
    end function cell_coord
 
-   !> Insert particle i (ids must be inserted once each; the arrays grow as needed).
-   pure subroutine insert(self, i, center, rho)
+   !> Insert particle i (ids must be inserted once each; the storage grows as needed).
+   pure subroutine insert(self, i, center, rho, rin)
       !> Cell list.
       class(cell_list_type), intent(inout) :: self
       !> Particle id (>= 1).
@@ -132,13 +171,10 @@ contains
       real(wp), intent(in) :: center(3)
       !> Bounding radius.
       real(wp), intent(in) :: rho
-      integer :: k, c(3), cell
-      integer, allocatable :: tmp(:)
-      if (i > size(self%next)) then
-         allocate (tmp(max(2 * size(self%next), i)))
-         tmp(:size(self%next)) = self%next
-         call move_alloc(tmp, self%next)
-      end if
+      !> Radius within which another particle certainly overlaps this one (see `neighbours`;
+      !> default 0: never certain).
+      real(wp), intent(in), optional :: rin
+      integer :: k, c(3), cell, b, m, first
       k = level_for(self, rho)
       call activate(self, k)
       associate (lv => self%levels(k))
@@ -146,16 +182,49 @@ contains
          c(2) = cell_coord(center(2), lv%h(2), lv%n(2), self%periodic)
          c(3) = cell_coord(center(3), lv%h(3), lv%n(3), self%periodic)
          cell = 1 + c(1) + lv%n(1) * (c(2) + lv%n(2) * c(3))
-         self%next(i) = lv%head(cell)
-         lv%head(cell) = i
-         lv%rho_max = max(lv%rho_max, rho)
+         first = lv%head(cell)
+         b = first
+         if (first == 0) then
+            call new_block(self, 0, b)
+         else if (self%blocks(first)%n == block_size) then
+            call new_block(self, first, b)
+         end if
+         lv%head(cell) = b
+         associate (bk => self%blocks(b))
+            bk%n = bk%n + 1
+            m = bk%n
+            bk%r(m)%x = center
+            bk%r(m)%rho = round_up(rho)
+            bk%r(m)%rin = 0.0_sp
+            if (present(rin)) bk%r(m)%rin = round_down(rin)
+            bk%r(m)%id = i
+            lv%rho_max = max(lv%rho_max, real(bk%r(m)%rho, wp))
+         end associate
          lv%count = lv%count + 1
       end associate
    end subroutine insert
 
+   !> A new empty block whose chain continues with block `next`.
+   pure subroutine new_block(self, next, nb)
+      type(cell_list_type), intent(inout) :: self
+      integer, intent(in) :: next
+      integer, intent(out) :: nb
+      type(cell_block_type), allocatable :: tmp(:)
+      if (self%nblock == size(self%blocks)) then
+         allocate (tmp(2 * size(self%blocks)))
+         tmp(:self%nblock) = self%blocks(:self%nblock)
+         call move_alloc(tmp, self%blocks)
+      end if
+      self%nblock = self%nblock + 1
+      nb = self%nblock
+      self%blocks(nb)%n = 0
+      self%blocks(nb)%next = next
+   end subroutine new_block
+
    !> Particles j whose bounding spheres (centers(:, j), radii(j)) intersect the sphere
    !> (center, rho): cand(1:ncand) with shift(:, 1:ncand) such that the image of j that meets the
-   !> query has centre centers(:, j) + shift. The arrays grow as needed.
+   !> query has centre centers(:, j) + shift. The arrays grow as needed. The order is
+   !> deterministic: levels and cells in index order, in a cell the most recently inserted first.
    pure subroutine query(self, center, rho, centers, radii, cand, shift, ncand)
       !> Cell list.
       class(cell_list_type), intent(in) :: self
@@ -173,9 +242,9 @@ contains
       real(wp), allocatable, intent(inout) :: shift(:, :)
       !> Number of candidates.
       integer, intent(out) :: ncand
-      integer :: k, lo(3), hi(3), i1, i2, i3, c1, c2, c3, cell, j, s1, s2, s3, d3
+      integer :: k, lo(3), hi(3), i1, i2, i3, c1, c2, c3, cell, j, s1, s2, s3, d3, b, m
       real(wp) :: reach, d(3), sh(3), lim, half(3)
-      logical :: level_images
+      logical :: level_images, full(3)
       ncand = 0
       if (.not. allocated(cand)) allocate (cand(64), shift(3, 64))
       half = 0.5_wp * self%box
@@ -183,19 +252,7 @@ contains
          associate (lv => self%levels(k))
             if (lv%count == 0) cycle
             reach = rho + lv%rho_max
-            do d3 = 1, 3
-               lo(d3) = floor((center(d3) - reach) / lv%h(d3))
-               hi(d3) = floor((center(d3) + reach) / lv%h(d3))
-               if (self%periodic) then
-                  if (hi(d3) - lo(d3) + 1 >= lv%n(d3)) then
-                     lo(d3) = 0
-                     hi(d3) = lv%n(d3) - 1
-                  end if
-               else
-                  lo(d3) = max(0, lo(d3))
-                  hi(d3) = min(lv%n(d3) - 1, hi(d3))
-               end if
-            end do
+            call cell_range(self, lv, center, reach, lo, hi, full)
             ! a particle can meet several images of another only when the two radii exceed half
             ! an edge; otherwise the nearest image is the only candidate
             level_images = self%periodic .and. any(2.0_wp * reach > self%box)
@@ -206,35 +263,32 @@ contains
                   do i1 = lo(1), hi(1)
                      c1 = wrap_index(i1, lv%n(1))
                      cell = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
-                     j = lv%head(cell)
-                     do while (j > 0)
-                        lim = rho + radii(j)
-                        d = centers(:, j) - center
-                        if (level_images) then
-                           do s3 = -1, 1
-                              do s2 = -1, 1
-                                 do s1 = -1, 1
-                                    sh = [s1, s2, s3] * self%box
-                                    if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
+                     b = lv%head(cell)
+                     do while (b > 0)
+                        do m = self%blocks(b)%n, 1, -1
+                           j = self%blocks(b)%r(m)%id
+                           lim = rho + radii(j)
+                           d = centers(:, j) - center
+                           if (level_images) then
+                              do s3 = -1, 1
+                                 do s2 = -1, 1
+                                    do s1 = -1, 1
+                                       sh = [s1, s2, s3] * self%box
+                                       if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
+                                    end do
                                  end do
                               end do
-                           end do
-                        else if (self%periodic) then
-                           ! centres lie in the box, so |d| < L: one shift gives the nearest image
-                           do d3 = 1, 3
-                              if (d(d3) > half(d3)) then
-                                 sh(d3) = -self%box(d3)
-                              else if (d(d3) < -half(d3)) then
-                                 sh(d3) = self%box(d3)
-                              else
-                                 sh(d3) = 0.0_wp
-                              end if
-                           end do
-                           if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
-                        else
-                           if (sum(d**2) < lim * lim) call push(cand, shift, ncand, j, [0.0_wp, 0.0_wp, 0.0_wp])
-                        end if
-                        j = self%next(j)
+                           else if (self%periodic) then
+                              ! centres lie in the box, so |d| < L: one shift gives the nearest image
+                              do d3 = 1, 3
+                                 sh(d3) = nearest_shift(d(d3), half(d3), self%box(d3))
+                              end do
+                              if (sum((d + sh)**2) < lim * lim) call push(cand, shift, ncand, j, sh)
+                           else
+                              if (sum(d**2) < lim * lim) call push(cand, shift, ncand, j, [0.0_wp, 0.0_wp, 0.0_wp])
+                           end if
+                        end do
+                        b = self%blocks(b)%next
                      end do
                   end do
                end do
@@ -242,6 +296,182 @@ contains
          end associate
       end do
    end subroutine query
+
+   !> Candidates among the stored particles with jmin < id <= jmax (default: all) for an overlap
+   !> test with a particle of bounding sphere (center, rho): cand(1:ncand) with image shifts
+   !> shift(:, 1:ncand)
+   !> (the image of j meeting the query has centre x_j + shift) whose stored bounding spheres
+   !> intersect it. With `rin`, the search stops as soon as a stored particle j lies closer than
+   !> rin + rin_j (the radii given to `insert`): then `hit` is true and the list is incomplete.
+   !> Visiting order: levels from the coarsest; in a level the query's own cell first, then the
+   !> cells outwards, nearer side first (so that a certain overlap is found early).
+   pure subroutine neighbours(self, center, rho, cand, shift, ncand, hit, rin, jmin, jmax)
+      !> Cell list.
+      class(cell_list_type), intent(in) :: self
+      !> Query centre (inside the box).
+      real(wp), intent(in) :: center(3)
+      !> Query bounding radius.
+      real(wp), intent(in) :: rho
+      !> Candidate ids.
+      integer, allocatable, intent(inout) :: cand(:)
+      !> Image shifts, (3, :).
+      real(wp), allocatable, intent(inout) :: shift(:, :)
+      !> Number of candidates.
+      integer, intent(out) :: ncand
+      !> A certain overlap was found.
+      logical, intent(out) :: hit
+      !> Radius of the query within which a stored particle's centre is a certain overlap, with the
+      !> stored particle's own rin added.
+      real(wp), intent(in), optional :: rin
+      !> Only ids above jmin count.
+      integer, intent(in), optional :: jmin
+      !> Only ids up to jmax count.
+      integer, intent(in), optional :: jmax
+      integer :: k, lo(3), hi(3), own(3), side(3), na(3), nb(3), t1, t2, t3, i1, i2, i3, c1, c2, c3
+      integer :: cell, s1, s2, s3, d3, b, m, j0, j1
+      real(wp) :: reach, d(3), e(3), sh(3), csh(3), lim, half(3), qin, rr, r2
+      logical :: level_images, full(3), anyfull, use_in
+      ncand = 0
+      hit = .false.
+      if (.not. allocated(cand)) allocate (cand(64), shift(3, 64))
+      half = 0.5_wp * self%box
+      use_in = present(rin)
+      qin = 0.0_wp
+      if (use_in) qin = rin
+      j0 = 0
+      if (present(jmin)) j0 = jmin
+      j1 = huge(1)
+      if (present(jmax)) j1 = jmax
+      do k = size(self%levels), 1, -1
+         associate (lv => self%levels(k))
+            if (lv%count == 0) cycle
+            reach = rho + lv%rho_max
+            level_images = self%periodic .and. any(2.0_wp * reach > self%box)
+            call cell_range(self, lv, center, reach, lo, hi, full)
+            anyfull = any(full)
+            do d3 = 1, 3
+               own(d3) = min(hi(d3), max(lo(d3), floor(center(d3) / lv%h(d3))))
+               side(d3) = merge(1, -1, center(d3) - own(d3) * lv%h(d3) > 0.5_wp * lv%h(d3))
+               na(d3) = merge(hi(d3) - own(d3), own(d3) - lo(d3), side(d3) > 0)
+               nb(d3) = hi(d3) - lo(d3) - na(d3)
+            end do
+            do t3 = 0, hi(3) - lo(3)
+               i3 = zigzag(t3, own(3), side(3), na(3), nb(3))
+               c3 = wrap_index(i3, lv%n(3))
+               csh(3) = real((i3 - c3) / lv%n(3), wp) * self%box(3)
+               do t2 = 0, hi(2) - lo(2)
+                  i2 = zigzag(t2, own(2), side(2), na(2), nb(2))
+                  c2 = wrap_index(i2, lv%n(2))
+                  csh(2) = real((i2 - c2) / lv%n(2), wp) * self%box(2)
+                  do t1 = 0, hi(1) - lo(1)
+                     i1 = zigzag(t1, own(1), side(1), na(1), nb(1))
+                     c1 = wrap_index(i1, lv%n(1))
+                     csh(1) = real((i1 - c1) / lv%n(1), wp) * self%box(1)
+                     cell = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
+                     b = lv%head(cell)
+                     do while (b > 0)
+                        associate (bk => self%blocks(b))
+                           do m = 1, bk%n
+                              if (bk%r(m)%id <= j0 .or. bk%r(m)%id > j1) cycle
+                              lim = rho + real(bk%r(m)%rho, wp)
+                              rr = qin + real(bk%r(m)%rin, wp)
+                              if (level_images) then
+                                 d = bk%r(m)%x - center
+                                 do s3 = -1, 1
+                                    do s2 = -1, 1
+                                       do s1 = -1, 1
+                                          sh = [s1, s2, s3] * self%box
+                                          r2 = sum((d + sh)**2)
+                                          if (r2 >= lim * lim) cycle
+                                          if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
+                                             hit = .true.
+                                             return
+                                          end if
+                                          call push(cand, shift, ncand, bk%r(m)%id, sh)
+                                       end do
+                                    end do
+                                 end do
+                                 cycle
+                              end if
+                              ! the cell's image gives the shift, except along edges whose whole
+                              ! range of cells is visited (there: the nearest image)
+                              sh = csh
+                              e = bk%r(m)%x - center
+                              if (anyfull) then
+                                 do d3 = 1, 3
+                                    if (full(d3)) sh(d3) = nearest_shift(e(d3), half(d3), self%box(d3))
+                                 end do
+                              end if
+                              d = e + sh
+                              r2 = d(1) * d(1) + d(2) * d(2) + d(3) * d(3)
+                              if (r2 >= lim * lim) cycle
+                              if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
+                                 hit = .true.
+                                 return
+                              end if
+                              call push(cand, shift, ncand, bk%r(m)%id, sh)
+                           end do
+                           b = bk%next
+                        end associate
+                     end do
+                  end do
+               end do
+            end do
+         end associate
+      end do
+   end subroutine neighbours
+
+   !> Cells lo..hi (unwrapped indices) within `reach` of `center` in a level; `full` where the
+   !> range covers every cell of a periodic edge (then 0..n-1).
+   pure subroutine cell_range(self, lv, center, reach, lo, hi, full)
+      type(cell_list_type), intent(in) :: self
+      type(cell_level_type), intent(in) :: lv
+      real(wp), intent(in) :: center(3), reach
+      integer, intent(out) :: lo(3), hi(3)
+      logical, intent(out) :: full(3)
+      integer :: d3
+      do d3 = 1, 3
+         lo(d3) = floor((center(d3) - reach) / lv%h(d3))
+         hi(d3) = floor((center(d3) + reach) / lv%h(d3))
+         full(d3) = .false.
+         if (self%periodic) then
+            if (hi(d3) - lo(d3) + 1 >= lv%n(d3)) then
+               lo(d3) = 0
+               hi(d3) = lv%n(d3) - 1
+               full(d3) = .true.
+            end if
+         else
+            lo(d3) = max(0, lo(d3))
+            hi(d3) = min(lv%n(d3) - 1, hi(d3))
+         end if
+      end do
+   end subroutine cell_range
+
+   !> The t-th (from 0) index of a range visited outwards from `own`: own, own + s, own - s,
+   !> own + 2 s, ... where a cells lie on the side s and b on the other; once one side is used up
+   !> the rest of the other follows.
+   pure integer function zigzag(t, own, s, a, b) result(i)
+      integer, intent(in) :: t, own, s, a, b
+      integer :: mn
+      mn = min(a, b)
+      if (t <= 2 * mn) then
+         i = own + merge(s, -s, mod(t, 2) == 1) * ((t + 1) / 2)
+      else
+         i = own + merge(s, -s, a > b) * (t - mn)
+      end if
+   end function zigzag
+
+   !> Shift (0 or +-L) that brings a displacement d, |d| < L, to the nearest image.
+   elemental real(wp) function nearest_shift(d, half, length) result(sh)
+      real(wp), intent(in) :: d, half, length
+      if (d > half) then
+         sh = -length
+      else if (d < -half) then
+         sh = length
+      else
+         sh = 0.0_wp
+      end if
+   end function nearest_shift
 
    !> Cell index i wrapped into 0..n-1 (i lies in -n..2n-1 for the ranges used here).
    elemental integer function wrap_index(i, n) result(c)
@@ -255,6 +485,20 @@ contains
          if (c >= n) c = modulo(c, n)
       end if
    end function wrap_index
+
+   !> x in single precision, rounded up.
+   elemental real(sp) function round_up(x) result(r)
+      real(wp), intent(in) :: x
+      r = real(x, sp)
+      if (real(r, wp) < x) r = nearest(r, 1.0_sp)
+   end function round_up
+
+   !> x in single precision, rounded down.
+   elemental real(sp) function round_down(x) result(r)
+      real(wp), intent(in) :: x
+      r = real(x, sp)
+      if (real(r, wp) > x) r = nearest(r, -1.0_sp)
+   end function round_down
 
    pure subroutine push(cand, shift, ncand, jj, s)
       integer, allocatable, intent(inout) :: cand(:)

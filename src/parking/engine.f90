@@ -64,8 +64,13 @@ module anm_parking_engine
       type(sh_expansion_type), allocatable :: layers(:)
       !> Volume inside each layer's outer surface (shape units).
       real(wp), allocatable :: layer_volume(:)
-      !> Bounding radius of the largest body used (shape units).
+      !> Bounding radius of the largest body the overlap tests use (shape units).
       real(wp) :: r_out = 0.0_wp
+      !> Radii (shape units) such that a particle of this kind, placed as a candidate, certainly
+      !> overlaps a parked one whose centre is closer than scale r_in_query + scale_j r_in_parked
+      !> (the inscribed radii of the bodies the shell mode tests: the overlap test's own first
+      !> stage).
+      real(wp) :: r_in_query = 0.0_wp, r_in_parked = 0.0_wp
    end type particle_kind_type
 
    !> The attempt sequence of one particle: the thesis' four nested randomness sources, drawn from
@@ -85,7 +90,7 @@ contains
 
    !> Build the model the configuration asks for. Progress goes to `progress_unit` (stderr in the
    !> program) about every two seconds.
-   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit)
+   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit, max_batch)
       !> Validated configuration.
       type(run_config_type), intent(in) :: cfg
       !> The packed model.
@@ -98,7 +103,11 @@ contains
       type(error_type), allocatable, intent(out) :: error
       !> Unit for progress lines (none when absent).
       integer, intent(in), optional :: progress_unit
+      !> Largest batch of speculated particles (default: no limit; 1 runs the plain serial
+      !> algorithm, which tests use as the reference).
+      integer, intent(in), optional :: max_batch
       type(contact_params_type) :: params
+      integer :: batch_limit
       type(cell_list_type) :: cl
       integer, allocatable :: first_kind(:), nkind_sieve(:)
       real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:), cand_shift(:, :)
@@ -106,8 +115,10 @@ contains
       real(wp) :: vbox, vol, target, v, sc, rho_min
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
       integer :: s, np, k, b, nstream, nlev, np_frozen, batch, nthreads, batch_size_now
-      integer(i8) :: batch_attempts
-      logical :: keep, sieve_done
+      integer(i8) :: tp1
+      logical :: keep, sieve_done, replaced
+      logical, allocatable :: alone(:)
+      real(wp), allocatable :: bx(:, :), br(:)
       type(attempt_type), allocatable :: at(:)
       type(void_grid_type) :: vg
       logical :: void
@@ -139,10 +150,11 @@ contains
       model%count = 0
       model%shell_fraction = 0.0_wp
       ! particles speculated per batch: any value gives the same model (see phase 2), so the batch
-      ! adapts to the work per particle: large batches amortise the parallel region when particles
-      ! park in a few attempts, small ones limit the speculation wasted when a sieve ends
+      ! adapts to the machine and to the sieve (next_batch)
       nthreads = omp_get_max_threads()
-      batch = nthreads
+      batch_limit = huge(1)
+      if (present(max_batch)) batch_limit = max(1, max_batch)
+      batch = min(nthreads, batch_limit)
       call system_clock(t0, rate)
       tlast = t0
 
@@ -177,9 +189,12 @@ contains
             ! against the frozen packing. Phase 2 (in order): each is re-checked against the
             ! particles accepted before it in this batch and, if hit, continues its own attempt
             ! sequence. Adding particles only adds overlaps, so this is exactly the serial
-            ! result whatever the batch size and the number of threads.
+            ! result whatever the batch size and the number of threads. The re-check is skipped
+            ! for a particle whose bounding sphere meets no earlier one of the batch (found in
+            ! parallel), as long as no earlier particle of the batch has moved.
             allocate (at(batch))
             batch_size_now = batch
+            call system_clock(tp1)
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
             do b = 1, batch
                block
@@ -194,11 +209,20 @@ contains
                end block
             end do
             !$omp end parallel do
+            call system_clock(t1)
+            allocate (bx(3, batch), br(batch), alone(batch))
+            do b = 1, batch
+               bx(:, b) = at(b)%c
+               br(b) = at(b)%sc * kinds(max(1, at(b)%k))%r_out
+            end do
+            call first_in_reach(bx, br, cfg%box, cfg%periodic, alone)
             np_frozen = np
+            replaced = .false.
             do b = 1, batch
                nstream = nstream + 1
-               if (.not. at(b)%done) then
+               if (.not. at(b)%done .and. (replaced .or. .not. alone(b))) then
                   if (.not. fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, np_frozen, cand, cand_shift)) then
+                     replaced = .true.
                      do
                         call next_attempt(at(b), s)
                         if (at(b)%done) exit
@@ -241,8 +265,9 @@ contains
                if (vg%stale > vg%nfree / 4) call vg%compact()
                if (vg%nfree == 0) sieve_done = .true.
             end if
-            batch_attempts = sum(at%count)
-            batch = nthreads * max(1, min(32, int(4096 * batch_size_now / max(1_i8, batch_attempts))))
+            deallocate (bx, br, alone)
+            batch = min(batch_limit, next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, &
+                                                model%count(s), nthreads))
             deallocate (at)
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
@@ -321,8 +346,10 @@ contains
          real(wp), intent(in) :: x(3), rr(3, 3), s_
          integer, allocatable, intent(inout) :: cnd(:)
          real(wp), allocatable, intent(inout) :: shf(:, :)
-         integer :: i, j, ncand
+         integer :: i, j, ncand, ii
          real(wp) :: xj(3)
+         logical :: hit
+         integer, allocatable :: order(:)
          ok = .false.
          if (.not. cfg%periodic .and. jmin == 0) then
             if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
@@ -331,10 +358,12 @@ contains
                if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box)) return
             end if
          end if
-         call cl%query(x, s_ * kinds(kn)%r_out, center, rho, cnd, shf, ncand)
-         do i = 1, ncand
+         call cl%neighbours(x, s_ * kinds(kn)%r_out, cnd, shf, ncand, hit, rin=s_ * kinds(kn)%r_in_query, jmin=jmin)
+         if (hit) return
+         call likely_first(kn, x, s_, cnd, shf, ncand, order)
+         do ii = 1, ncand
+            i = order(ii)
             j = cnd(i)
-            if (j <= jmin) cycle
             xj = center(:, j) + shf(:, i)
             associate (kj => kinds(kind_of(j)))
                if (cfg%nlayer == 0 .or. cfg%mode == shell_mode%overlap) then
@@ -350,6 +379,62 @@ contains
          end do
          ok = .true.
       end function fits
+
+      !> The order in which to test the candidates: the most likely overlaps first, so that an
+      !> attempt that fails usually fails at its first exact test. The key is where the centre
+      !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1).
+      !> Short lists are sorted (insertion sort, stable); long ones are kept in their order.
+      subroutine likely_first(kn, x, s_, cnd, shf, ncand, order)
+         integer, intent(in) :: kn, ncand
+         real(wp), intent(in) :: x(3), s_
+         integer, intent(in) :: cnd(:)
+         real(wp), intent(in) :: shf(:, :)
+         integer, allocatable, intent(out) :: order(:)
+         integer, parameter :: max_sorted = 64
+         real(wp) :: key(max_sorted), kk, r_in, r_out
+         integer :: i, m, j, oi
+         allocate (order(ncand))
+         do i = 1, ncand
+            order(i) = i
+         end do
+         if (ncand < 2 .or. ncand > max_sorted) return
+         do i = 1, ncand
+            j = cnd(i)
+            r_in = s_ * kinds(kn)%r_in_query + scale(j) * kinds(kind_of(j))%r_in_parked
+            r_out = s_ * kinds(kn)%r_out + rho(j)
+            key(i) = (norm2(center(:, j) + shf(:, i) - x) - r_in) / max(r_out - r_in, tiny(1.0_wp))
+         end do
+         do i = 2, ncand
+            oi = order(i)
+            kk = key(oi)
+            m = i - 1
+            do while (m >= 1)
+               if (key(order(m)) <= kk) exit
+               order(m + 1) = order(m)
+               m = m - 1
+            end do
+            order(m + 1) = oi
+         end do
+      end subroutine likely_first
+
+      !> Size of the next batch. Any size gives the same model, so it follows the machine: about
+      !> `batch_seconds` of phase 1 (few synchronisations, which matters most when the cores are
+      !> shared with other jobs), changing by at most a factor 2 per batch, and not much beyond the
+      !> particles the sieve still needs (speculation past its end is wasted work).
+      pure integer function next_batch(now, seconds, missing, vol_sieve, count_sieve, nthr) result(nb)
+         integer, intent(in) :: now, count_sieve, nthr
+         real(wp), intent(in) :: seconds, missing, vol_sieve
+         real(wp), parameter :: batch_seconds = 0.05_wp
+         integer, parameter :: max_per_thread = 1024
+         real(wp) :: f, need
+         f = 2.0_wp
+         if (seconds > 0.0_wp) f = max(0.5_wp, min(2.0_wp, batch_seconds / seconds))
+         nb = max(nthr, min(max_per_thread * nthr, nint(now * f)))
+         if (count_sieve > 0) then
+            need = max(0.0_wp, missing) / (vol_sieve / count_sieve)
+            nb = max(nthr, min(nb, int(min(need, real(huge(1) / 2, wp))) + nthr))
+         end if
+      end function next_batch
 
       !> Advance an attempt sequence by one attempt (or mark it done).
       subroutine next_attempt(a, sv)
@@ -440,7 +525,7 @@ contains
          rho(np) = s_ * kinds(kn)%r_out
          sieve_of(np) = s
          kind_of(np) = kn
-         call cl%insert(np, x, rho(np))
+         call cl%insert(np, x, rho(np), rin=s_ * kinds(kn)%r_in_parked)
       end subroutine add_particle
 
       subroutine grow()
@@ -464,6 +549,95 @@ contains
       end subroutine grow
    end subroutine run_parking
 
+   !> For each sphere (centres x(:, i) in the box, radii r(i)), whether no sphere of smaller index
+   !> meets it (nearest periodic image): spheres hashed into cells at least 2 max(r) wide, the 27
+   !> cells around each searched in parallel.
+   subroutine first_in_reach(x, r, box, periodic, alone)
+      !> Centres (3, n).
+      real(wp), intent(in) :: x(:, :)
+      !> Radii.
+      real(wp), intent(in) :: r(:)
+      !> Box edges.
+      real(wp), intent(in) :: box(3)
+      !> Periodic boundaries.
+      logical, intent(in) :: periodic
+      !> No sphere of smaller index meets sphere i.
+      logical, intent(out) :: alone(:)
+      integer, allocatable :: cell(:, :), first(:), item(:), key(:)
+      integer :: n, nc(3), nbucket, i, d
+      real(wp) :: h(3)
+      n = size(r)
+      alone = .true.
+      if (n < 2) return
+      nc = max(1, int(box / max(2.0_wp * maxval(r), tiny(1.0_wp))))
+      nc = min(nc, 1024)
+      h = box / nc
+      nbucket = 2**ceiling(log(real(2 * n, wp)) / log(2.0_wp))
+      allocate (cell(3, n), key(n), first(nbucket + 1), item(n))
+      do i = 1, n
+         do d = 1, 3
+            cell(d, i) = min(nc(d) - 1, max(0, int(x(d, i) / h(d))))
+         end do
+         key(i) = bucket_of(cell(:, i))
+      end do
+      ! counting sort by bucket, indices ascending within a bucket
+      first = 0
+      do i = 1, n
+         first(key(i) + 1) = first(key(i) + 1) + 1
+      end do
+      do i = 2, nbucket + 1
+         first(i) = first(i) + first(i - 1)
+      end do
+      do i = 1, n
+         first(key(i)) = first(key(i)) + 1
+         item(first(key(i))) = i
+      end do
+      ! first(k) now ends bucket k: bucket k is item(first(k - 1) + 1 : first(k)), bucket 1 from 1
+      !$omp parallel do default(none) shared(n, x, r, box, periodic, nc, cell, first, item, alone) &
+      !$omp& private(i) schedule(static)
+      do i = 2, n
+         alone(i) = nothing_near(i)
+      end do
+      !$omp end parallel do
+   contains
+      pure integer function bucket_of(c) result(k)
+         integer, intent(in) :: c(3)
+         k = 1 + iand(c(1) + 1031 * (c(2) + 1031 * c(3)), nbucket - 1)
+      end function bucket_of
+
+      logical function nothing_near(i) result(ok)
+         integer, intent(in) :: i
+         integer :: d1, d2, d3, c(3), k, m, j, lo
+         real(wp) :: dx(3)
+         ok = .true.
+         do d3 = -1, 1
+            do d2 = -1, 1
+               do d1 = -1, 1
+                  c = cell(:, i) + [d1, d2, d3]
+                  if (periodic) then
+                     c = modulo(c, nc)
+                  else if (any(c < 0 .or. c >= nc)) then
+                     cycle
+                  end if
+                  k = bucket_of(c)
+                  lo = 1
+                  if (k > 1) lo = first(k - 1) + 1
+                  do m = lo, first(k)
+                     j = item(m)
+                     if (j >= i) exit
+                     dx = x(:, j) - x(:, i)
+                     if (periodic) dx = dx - box * anint(dx / box)
+                     if (sum(dx**2) < (r(i) + r(j))**2) then
+                        ok = .false.
+                        return
+                     end if
+                  end do
+               end do
+            end do
+         end do
+      end function nothing_near
+   end subroutine first_in_reach
+
    !> Load the shapes of every sieve (each distinct source once) and precompute every kind.
    subroutine prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
       type(run_config_type), intent(in) :: cfg
@@ -474,7 +648,8 @@ contains
       type(shape_set_type), allocatable :: sets(:)
       integer, allocatable :: set_of(:), set_first(:)
       character(len=512), allocatable :: src(:)
-      integer :: s, nset, k, i, ns, nlev, lev, total, n
+      integer :: s, nset, k, i, ns, nlev, lev, total, n, j, sieve, level
+      integer, allocatable :: same(:)
       type(error_type), allocatable :: errs(:)
       logical, allocatable :: failed(:)
 
@@ -541,9 +716,25 @@ contains
             end do
          end do
       end do
-      failed = .false.
-      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n) private(i) schedule(dynamic)
+      ! a kind equal to an earlier one (same shape and order, and with shells in mm the same width:
+      ! e.g. two sieves of one source) is computed once and copied
+      allocate (same(n))
       do i = 1, n
+         same(i) = i
+         do j = 1, i - 1
+            if (same(j) /= j) cycle
+            if (kinds(j)%shape /= kinds(i)%shape .or. kinds(j)%order /= kinds(i)%order) cycle
+            if (nlev > 1) then
+               if (level_width(cfg, kinds(j)) /= level_width(cfg, kinds(i))) cycle
+            end if
+            same(i) = j
+            exit
+         end do
+      end do
+      failed = .false.
+      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n, same) private(i) schedule(dynamic)
+      do i = 1, n
+         if (same(i) /= i) cycle
          block
             type(error_type), allocatable :: err
             call prepare_one(cfg, model%shapes(kinds(i)%shape), trim(model%shape_names(kinds(i)%shape)), kinds(i), err)
@@ -560,7 +751,23 @@ contains
             return
          end if
       end do
+      do i = 1, n
+         if (same(i) == i) cycle
+         sieve = kinds(i)%sieve
+         level = kinds(i)%level
+         kinds(i) = kinds(same(i))
+         kinds(i)%sieve = sieve
+         kinds(i)%level = level
+      end do
    end subroutine prepare_kinds
+
+   !> Width of a kind's width level (shells in mm).
+   pure real(wp) function level_width(cfg, kd) result(w)
+      type(run_config_type), intent(in) :: cfg
+      type(particle_kind_type), intent(in) :: kd
+      w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
+          / width_levels
+   end function level_width
 
    subroutine prepare_one(cfg, shape, name, kd, error)
       type(run_config_type), intent(in) :: cfg
@@ -582,10 +789,11 @@ contains
       call new_contact_body(kd%body, s, error, next=cfg%n_ext)
       if (allocated(error)) return
       kd%r_out = kd%body%r_max
+      kd%r_in_query = kd%body%r_min
+      kd%r_in_parked = kd%body%r_min
       if (cfg%nlayer == 0) return
       if (cfg%thickness_unit == "mm") then
-         w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
-             / width_levels
+         w = level_width(cfg, kd)
          sc = w / kd%width
          t = cfg%thickness / sc
       else
@@ -600,9 +808,13 @@ contains
       do k = 1, size(t)
          kd%layer_volume(k) = reports(k)%outer_volume
       end do
+      ! overlapping shells do not take part in the parking: no contact body for them
+      if (cfg%mode == shell_mode%overlap) return
       allocate (kd%shell_body)
       call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=cfg%n_ext)
       if (allocated(error)) return
       kd%r_out = max(kd%r_out, kd%shell_body%r_max)
+      kd%r_in_query = kd%shell_body%r_min
+      if (cfg%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
    end subroutine prepare_one
 end module anm_parking_engine
