@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Benchmarks (they print figures; they are not timed tests). Figures go to docs/performance.md
-# by hand, with this command and the machine's core count.
+# The component benchmarks only (SH synthesis, shells, contact, slicing), printed to stdout; they
+# are not timed tests. `bash scripts/benchmarks.sh` runs these and the parking jobs and rewrites
+# docs/performance.md.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"

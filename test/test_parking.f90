@@ -46,7 +46,9 @@ contains
               new_unittest("shell modes keep surface gaps >= 2t, >= t, >= 0 (spheres)", test_shell_modes), &
               new_unittest("1 and 2 threads give the same model", test_threads), &
               new_unittest("batches give the serial model (dense spheres, shapes with shells)", test_batches), &
-              new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void)]
+              new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void), &
+              new_unittest("max_failures: the thesis' model is a prefix, more particles follow", test_max_failures), &
+              new_unittest("rounding of a sieve moves to the next: total within half a grain", test_carry)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -511,4 +513,52 @@ contains
       if (allocated(error)) return
       call check(error, v%achieved_fraction(1) >= u%achieved_fraction(1), "void placement packed less")
    end subroutine test_void
+
+   subroutine test_max_failures(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: n
+      character(len=*), parameter :: base = "&box length = 8, 8, 8 /"//new_line("a")// &
+         "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.6, source = 'sphere', order = 0 /" &
+         //new_line("a")
+      ! the particles are the same sequence of attempt streams: a failed particle is skipped, so the
+      ! model that stops at the first failure is the beginning of the one that allows 30
+      call run_nml("fail1.nml", base//"&parking max_locations = 50 /", a, error)
+      if (allocated(error)) return
+      call run_nml("fail30.nml", base//"&parking max_locations = 50, max_failures = 30 /", b, error)
+      if (allocated(error)) return
+      n = a%np
+      print '(a,i0,a,i0,a)', "        spheres, 50 locations: ", a%np, " particles (max_failures = 1), ", b%np, &
+         " (30)"
+      call check(error, b%np > a%np, "max_failures = 30 parked no more particles than 1")
+      if (allocated(error)) return
+      call check(error, all(a%center == b%center(:, :n)) .and. all(a%rotation == b%rotation(:, :, :n)), &
+                 "the model with max_failures = 1 is not the beginning of the other")
+      if (allocated(error)) return
+      call check(error, b%achieved_fraction(1) < 0.6_wp, "an unreachable target was reached")
+   end subroutine test_max_failures
+
+   subroutine test_carry(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      real(wp) :: v1, v2, total
+      ! spheres of diameter 4 and 2 in a 20 mm box: one coarse grain is 0.0042 of the box, so
+      ! 0.052 ends at 12 grains (0.0503); the next sieve takes the 0.0017 left over, and the total
+      ! lands within half a fine grain (0.00026) of 0.102. Without the carry it would miss by 0.0017.
+      call run_nml("carry.nml", "&box length = 20, 20, 20 /"//new_line("a")// &
+                   "&sieves nsieve = 2, min_width = 4, 2, max_width = 4, 2, fraction = 0.052, 0.05, source = 2*'sphere', " &
+                   //"order = 2*0 /"//new_line("a")//"&parking max_locations = 20000 /", m, error)
+      if (allocated(error)) return
+      v1 = 4.0_wp / 3.0_wp * acos(-1.0_wp) * 2.0_wp**3 / 8000.0_wp
+      v2 = v1 / 8.0_wp
+      total = sum(m%achieved_fraction)
+      print '(a,2(i0,a),f8.5,a,f8.5)', "        ", m%count(1), " + ", m%count(2), " spheres, total ", total, &
+         " of ", sum(m%target_fraction)
+      call check(error, m%count(1) == 12, "coarse sieve should end at 12 grains")
+      if (allocated(error)) return
+      call check(error, abs(total - 0.102_wp) <= 0.5_wp * v2 + 1.0e-12_wp, "total not within half a fine grain")
+      if (allocated(error)) return
+      call check(error, abs(m%achieved_fraction(2) - (0.102_wp - 12 * v1)) <= 0.5_wp * v2 + 1.0e-12_wp, &
+                 "fine sieve did not take the coarse sieve's remainder")
+   end subroutine test_carry
 end module test_parking

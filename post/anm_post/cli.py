@@ -18,7 +18,7 @@ EPILOG = """examples:
   anm-post slice out/default.h5 --center 10 10 10 --normal 1 1 0 --size 12 12 --pixel 0.04 --png out/oblique.png
   anm-post slice out/default.h5 --axis x --pixel 0.1 --density 0.1 --labels out/stack.h5   (stack, rho_s = 0.1)
   anm-post plot next.csv -o next.png                  plot of `anm study next|nbox ... --csv next.csv`
-  anm-post rdf out/msand/model.h5 --density 0.5 --csv g.csv --png g.png --points 1000000   wall effect g(t)
+  anm-post rdf out/msand/model.h5 --density 1 --volume --csv g.csv --png g.png   wall effect g(t), slices and 3D
   anm-post convergence out/msand/model.h5 --densities 0.01,0.1,0.5,1 --csv conv.csv --png conv.png
 """
 
@@ -214,20 +214,28 @@ def _check_particle(args: argparse.Namespace, model) -> None:
 
 def _cmd_rdf(args: argparse.Namespace) -> int:
     from .model import read_model
-    from .walleffect import plot_rdf, rdf, volume_fractions
+    from .walleffect import plot_rdf, prepare, rdf, volume_fractions
     spec = _rdf_spec(args)
     model = read_model(args.model)
     _check_particle(args, model)
-    res = rdf(model, spec)
-    vol = volume_fractions(model, spec, n_points=args.points, seed=args.seed) if args.points else None
+    if args.spacing is not None and not args.spacing > 0:
+        raise AnmPostError(f"--spacing: must be positive, got {args.spacing}")
+    if args.replicates < 2:
+        raise AnmPostError(f"--replicates: at least 2 are needed for a standard error, got {args.replicates}")
+    st = prepare(model, spec)
+    res = rdf(model, spec, setup=st)
+    vol = volume_fractions(model, spec, spacing=args.spacing, replicates=args.replicates, seed=args.seed,
+                           setup=st) if args.volume else None
     print(f"particle {res.particle}: length {res.length:.4g} mm, phi_B {res.phi_b:.4f} (small sieves "
           f"{','.join(map(str, res.small_sieves))}), {len(res.positions)} slices, {res.seconds:.1f} s"
-          + (f"; 3D: {vol.n_points} points, {vol.seconds:.1f} s" if vol else ""), file=sys.stderr)
-    out = ["layer,t_inner_mm,t_outer_mm,g,g_sd,g_se" + (",g_3d,g_3d_se" if vol else "")]
+          + (f"; 3D: {vol.replicates} replicates of {vol.n_points // vol.replicates} points (spacing "
+             f"{vol.spacing:g} mm), {vol.seconds:.1f} s" if vol else ""), file=sys.stderr)
+    out = ["layer,t_inner_mm,t_outer_mm,g,g_sd,g_se" + (",g_3d,g_3d_se,diff_per_se" if vol else "")]
     for k in range(len(res.g)):
         line = f"{k + 1},{res.t_inner[k]:.4f},{res.t_outer[k]:.4f},{res.g[k]:.4f},{res.g_sd[k]:.4f},{res.g_se[k]:.4f}"
         if vol:
-            line += f",{vol.phi[k] / res.phi_b:.4f},{vol.phi_se[k] / res.phi_b:.4f}"
+            g3 = vol.phi[k] / res.phi_b
+            line += f",{g3:.4f},{vol.phi_se[k] / res.phi_b:.4f},{(res.g[k] - g3) / res.g_se[k]:.2f}"
         out.append(line)
     print("\n".join(out))
     if args.csv:
@@ -353,13 +361,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("rdf", help="wall effect g(t) around one particle (thesis 3.4, Fig 3.8)",
                        description="g(t) = small-particle fraction in each shell layer around the RDF particle "
                                    "divided by the bulk fraction phi_B (thesis Eqs 3.6, 3.10, 3.11), from parallel "
-                                   "slices across the particle; with --points also the same fraction measured in "
-                                   "the volume by Monte Carlo points (no slices). Prints a CSV table.",
+                                   "slices across the particle; with --volume also the same fraction measured in "
+                                   "the volume (stratified random points in the layers, no slices; standard error "
+                                   "from independent replicates). Prints a CSV table; with --volume its last column "
+                                   "is (g - g_3d) / g_se, g_se the slices' standard error.",
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     _rdf_options(p)
     p.add_argument("--density", type=float, default=1.0, metavar="RHO", help="slice density rho_s (default 1)")
-    p.add_argument("--points", type=int, default=0, metavar="N", help="also the 3D value from N Monte Carlo points")
-    p.add_argument("--seed", type=int, default=1, help="seed of the Monte Carlo points (default 1)")
+    p.add_argument("--volume", action="store_true", help="also the 3D value of every layer (no slices)")
+    p.add_argument("--spacing", type=float, metavar="MM",
+                   help="cell size of the stratified volume sample (default: --pixel)")
+    p.add_argument("--replicates", type=int, default=8, metavar="R",
+                   help="independent volume samples for the standard error of the 3D value (default 8)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the volume samples (default 1)")
     p.set_defaults(func=_cmd_rdf)
 
     p = sub.add_parser("convergence", help="g(t) and its spread against the slice density (thesis Figs 3.9, 3.10)",

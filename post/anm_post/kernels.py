@@ -101,3 +101,25 @@ def slice_labels(a: np.ndarray, b: np.ndarray, order: np.ndarray, bounds: np.nda
     tr = (2, 1, 0)
     return (np.ascontiguousarray(part.transpose(tr)), np.ascontiguousarray(lay.transpose(tr)),
             np.ascontiguousarray(own.transpose(tr)), np.asarray(stats))
+
+
+def form_radii(a: np.ndarray, b: np.ndarray, order: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Radii (ndir, nform) of real-form surfaces a, b (lmax+1, lmax+1, nform) of the given orders
+    along body-frame directions dirs (ndir, 3), all forms from one recursion per direction."""
+    dirs = np.atleast_2d(np.asarray(dirs, dtype=np.float64))
+    r, status, msg = _api().api_form_radii(_f64(a), _f64(b), _i32(order), _f64(dirs.T))
+    _check(status, msg, "form radii")
+    return np.asarray(r)
+
+
+def point_labels(a: np.ndarray, b: np.ndarray, order: np.ndarray, bounds: np.ndarray, form: np.ndarray,
+                 center: np.ndarray, rotation: np.ndarray, scale: np.ndarray, box: np.ndarray, periodic: bool,
+                 points: np.ndarray) -> np.ndarray:
+    """Particle containing each point (npoint, 3) (1-based id, 0 none; the first found when several
+    do), forms as for slice_labels; form (np,) 1-based."""
+    points = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    label, status, msg = _api().api_point_labels(
+        _f64(a), _f64(b), _i32(order), _f64(bounds), _i32(form), _f64(np.asarray(center).T),
+        _f64(np.asarray(rotation).transpose(1, 2, 0)), _f64(scale), _f64(box), int(bool(periodic)), _f64(points.T))
+    _check(status, msg, "point labels")
+    return np.asarray(label)

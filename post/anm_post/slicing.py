@@ -193,7 +193,7 @@ class Slicer:
         self._form = self._form.reshape(-1).astype(np.int32)
         self._lmax = int(max(self._pairs[:, 1].max(initial=0), 1))
         self._pa = self._pb = self._pbounds = None
-        self._length: np.ndarray | None = None
+        self._geometry: np.ndarray | None = None
         self._shell_cache: dict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
         if shells is not None and shells.particles is not None:
             ids = np.asarray(shells.particles, dtype=int)
@@ -208,13 +208,60 @@ class Slicer:
                 m.shape_coeffs, m.shape_nmax, self._pairs[:, 0], self._pairs[:, 1], self._lmax)
         return self._pa, self._pb, self._pbounds
 
+    def geometry(self) -> np.ndarray:
+        """Geometry (nform, 8) of every (shape, order) form, columns kernels.GEOMETRY_COLUMNS (shape
+        units; computed once)."""
+        if self._geometry is None:
+            m = self.model
+            self._geometry = kernels.geometry(m.shape_coeffs, m.shape_nmax, self._pairs[:, 0], self._pairs[:, 1])
+        return self._geometry
+
     def lengths(self) -> np.ndarray:
         """Length L (shape units) of every (shape, order) form."""
-        if self._length is None:
-            m = self.model
-            geo = kernels.geometry(m.shape_coeffs, m.shape_nmax, self._pairs[:, 0], self._pairs[:, 1])
-            self._length = geo[:, kernels.GEOMETRY_COLUMNS.index("length")]
-        return self._length
+        return self.geometry()[:, kernels.GEOMETRY_COLUMNS.index("length")]
+
+    def layer_forms(self, pid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The surfaces slicing uses for particle pid and its shell layers, as forms: a, b (lmax+1,
+        lmax+1, 1 + nlayer), orders (1 + nlayer,), bounds (8, 1 + nlayer); form 0 is the particle,
+        form k the outer surface of layer k (shells built once and cached, as for slices)."""
+        if self.shells is None:
+            raise AnmPostError("layer_forms needs a Slicer with shells")
+        pid = int(pid)
+        if not (0 <= pid < self.model.n_particles):
+            raise AnmPostError(f"particle id must be in 0..{self.model.n_particles - 1}, got {pid}")
+        pa, pb, pbounds = self._particle_forms()
+        key = (int(self._form[pid]), tuple(np.round(self._shell_shape_units(np.array([pid]))[0], 12)))
+        self._build_shells([key])
+        sa, sb, so, sbd = self._shell_cache[key]
+        f = self._form[pid]
+        n0 = int(self._pairs[f, 1])
+        lmax = max(n0, int(so.max()))
+        nl = len(so)
+        a = np.zeros((lmax + 1, lmax + 1, nl + 1), order="F")
+        b = np.zeros_like(a)
+        a[:n0 + 1, :n0 + 1, 0] = pa[:n0 + 1, :n0 + 1, f]
+        b[:n0 + 1, :n0 + 1, 0] = pb[:n0 + 1, :n0 + 1, f]
+        for k in range(nl):
+            n = int(so[k])
+            a[:n + 1, :n + 1, k + 1] = sa[:n + 1, :n + 1, k]
+            b[:n + 1, :n + 1, k + 1] = sb[:n + 1, :n + 1, k]
+        orders = np.concatenate([[n0], so]).astype(np.int32)
+        bounds = np.concatenate([pbounds[:, [f]], sbd], axis=1)
+        return a, b, orders, bounds
+
+    def _build_shells(self, keys) -> None:
+        """Build the shells of the keys (form, distances in shape units) not in the cache."""
+        m = self.model
+        todo = sorted({k for k in keys if k not in self._shell_cache})
+        if not todo:
+            return
+        f = np.array([k[0] for k in todo])
+        th = np.array([k[1] for k in todo])
+        lmax_s = int(min(119, max(24, 2 * self._pairs[f, 1].max())))
+        sa, sb, so, sbd = kernels.shell_forms(m.shape_coeffs, m.shape_nmax, self._pairs[f, 0], self._pairs[f, 1],
+                                              th, lmax_s)
+        for j, key in enumerate(todo):
+            self._shell_cache[key] = (sa[:, :, :, j], sb[:, :, :, j], so[:, j], sbd[:, :, j])
 
     def _shell_shape_units(self, ids: np.ndarray) -> np.ndarray:
         """Cumulative layer distances (len(ids), nlayer) in shape units, quantised for mm."""
@@ -299,15 +346,7 @@ class Slicer:
         if sel.size == 0:
             return a, b, bounds, orders, shell_form
         keys = [(int(self._form[i]), tuple(np.round(t, 12))) for i, t in zip(sel, tsu)]
-        todo = sorted({k for k in keys if k not in self._shell_cache})
-        if todo:
-            f = np.array([k[0] for k in todo])
-            th = np.array([k[1] for k in todo])
-            lmax_s = int(min(119, max(24, 2 * self._pairs[f, 1].max())))
-            sa, sb, so, sbd = kernels.shell_forms(m.shape_coeffs, m.shape_nmax, self._pairs[f, 0], self._pairs[f, 1],
-                                                  th, lmax_s)
-            for j, key in enumerate(todo):
-                self._shell_cache[key] = (sa[:, :, :, j], sb[:, :, :, j], so[:, j], sbd[:, :, j])
+        self._build_shells(keys)
         used = sorted(set(keys))
         nlayer = shell_form.shape[1]
         lmax = max(a.shape[0] - 1, max(int(self._shell_cache[k][2].max()) for k in used))

@@ -14,16 +14,18 @@ sieves) A_ik^s. The small-particle fraction of layer k (Eq 3.10) and g (Eq 3.11)
 Per-slice values g_ik = A_ik^s / (A_ik phi_B) over the slices that cut layer k give the mean and
 standard deviation plotted as error bars (Fig 3.8); the standard error of g_k is that of a ratio
 estimator over blocks of consecutive slices spanning the widest small particle (closer slices cut
-the same particles and are not independent). `volume_fractions` estimates phi_k directly in the volume with
-uniform Monte Carlo points (no slices), so Eq 3.11 can be checked numerically.
+the same particles and are not independent). `volume_fractions` measures phi_k directly in the
+volume (a stratified random sample of each layer with the slicer's own surfaces, no slices; its
+standard error from independent replicates), so Eq 3.11 can be checked numerically.
 
 Library API:
     spec = RdfSpec(particle=None, n_shells=10, t_min=0.005, t_max=0.05, unit="fraction", axis="x",
                    pixel=0.05, density=1.0, small_sieves=None, small_below=None, phi_b=None)
-    res = rdf(model, spec)                       # RdfResult (per layer: t, g, mean, sd, se, counts)
-    vol = volume_fractions(model, spec, n_points=2_000_000, seed=1)   # 3D phi_k and its error
-    res.to_csv("g.csv"); plot_rdf(res, "g.png", volume=vol)
-    conv = convergence(model, spec, densities=(0.05, 0.1, 0.25, 0.5, 1.0))
+    st = prepare(model, spec)                    # shared by the calls below (optional)
+    res = rdf(model, spec, setup=st)             # RdfResult (per layer: t, g, mean, sd, se, counts)
+    vol = volume_fractions(model, spec, spacing=0.05, replicates=8, setup=st)   # 3D phi_k, its s.e.
+    res.to_csv("g.csv", vol); plot_rdf(res, "g.png", volume=vol)
+    conv = convergence(model, spec, densities=(0.05, 0.1, 0.25, 0.5, 1.0), setup=st)
 """
 from __future__ import annotations
 
@@ -108,6 +110,13 @@ class RdfResult:
     per_slice: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     @property
+    def layer_volume(self) -> np.ndarray:
+        """The slices' estimate of each layer's volume (mm^3): its pixels times R_s^2 times the
+        slice spacing."""
+        gap = float(self.positions[1] - self.positions[0]) if len(self.positions) > 1 else np.nan
+        return self.area * self.pixel ** 2 * gap
+
+    @property
     def t_mid(self) -> np.ndarray:
         """Layer mid distances (mm)."""
         return 0.5 * (self.t_inner + self.t_outer)
@@ -123,20 +132,30 @@ class RdfResult:
         """Write the per-layer table (with the 3D columns when `volume` is given)."""
         rows = self.rows()
         if volume is not None:
-            for r, pv, se in zip(rows, volume.phi, volume.phi_se):
-                r.update(phi_3d=pv, g_3d=pv / self.phi_b, g_3d_se=se / self.phi_b)
+            for r, pv, se, v, vse, vs in zip(rows, volume.phi, volume.phi_se, volume.volume, volume.volume_se,
+                                             self.layer_volume):
+                r.update(phi_3d=pv, g_3d=pv / self.phi_b, g_3d_se=se / self.phi_b,
+                         diff_per_se=(r["g"] - pv / self.phi_b) / r["g_se"], volume_slices_mm3=vs,
+                         volume_3d_mm3=v, volume_3d_se_mm3=vse)
         return _write_csv(path, rows, "--csv")
 
 
 @dataclass
 class VolumeResult:
-    """Small-particle fraction of each layer estimated in the volume: phi, its standard error
-    phi_se (binomial), points per layer and the number of points drawn."""
+    """Small-particle fraction of each layer measured in the volume (`volume_fractions`): phi and
+    its standard error phi_se (from independent replicates), the layer volumes (mm^3) and their
+    standard error, the sample's replicates, spacing (mm), strata (n_z, n_phi, radial strata per
+    layer), points drawn in all and phi of each replicate (replicates, K)."""
 
     phi: np.ndarray
     phi_se: np.ndarray
-    points: np.ndarray
+    volume: np.ndarray
+    volume_se: np.ndarray
+    replicates: int
+    spacing: float
+    strata: tuple
     n_points: int
+    per_replicate: np.ndarray
     seconds: float = 0.0
 
 
@@ -163,9 +182,7 @@ def particle_lengths(model: Model, slicer: Slicer | None = None) -> np.ndarray:
 def particle_volumes(model: Model, slicer: Slicer | None = None) -> np.ndarray:
     """Volume (mm^3) of every particle (its expansion at the order used)."""
     slicer = slicer or Slicer(model)
-    m = model
-    geo = kernels.geometry(m.shape_coeffs, m.shape_nmax, slicer._pairs[:, 0], slicer._pairs[:, 1])
-    return geo[slicer._form, kernels.GEOMETRY_COLUMNS.index("volume")] * m.scale ** 3
+    return slicer.geometry()[slicer._form, kernels.GEOMETRY_COLUMNS.index("volume")] * model.scale ** 3
 
 
 def small_sieves(model: Model, spec: RdfSpec) -> tuple[int, ...]:
@@ -214,7 +231,12 @@ def particle_extent(model: Model, pid: int, n_dirs: int = 6000) -> tuple[np.ndar
 
 # -- the measurement ---------------------------------------------------------------------------
 @dataclass
-class _Setup:
+class RdfSetup:
+    """What `rdf`, `convergence` and `volume_fractions` share for one model and RdfSpec (made by
+    `prepare`): the RDF particle pid, its length (mm), the shell distances t_mm, the small sieves,
+    phi_B, a Slicer of the whole model (full), one of the RDF particle alone with its shells (own:
+    the masks), the sampled box [lo, hi] and the widest small particle (mm)."""
+
     pid: int
     length: float
     t_mm: np.ndarray
@@ -227,7 +249,9 @@ class _Setup:
     width: float
 
 
-def _setup(model: Model, spec: RdfSpec) -> _Setup:
+def prepare(model: Model, spec: RdfSpec) -> RdfSetup:
+    """The RDF particle, its shells, phi_B and the two slicers (computed once; pass the result as
+    `setup=` to rdf, convergence and volume_fractions of the same model and spec)."""
     full = Slicer(model)
     lengths = particle_lengths(model, full)
     pid = int(np.argmax(lengths)) if spec.particle is None else int(spec.particle)
@@ -249,10 +273,10 @@ def _setup(model: Model, spec: RdfSpec) -> _Setup:
     lo, hi = particle_extent(model, pid)
     margin = t_mm[-1] + 0.01 * length + 2 * spec.pixel
     width = float(np.max(np.asarray(model.sieves["max_width"], float)[list(small)]))
-    return _Setup(pid, length, t_mm, small, float(phi_b), full, own, lo - margin, hi + margin, width)
+    return RdfSetup(pid, length, t_mm, small, float(phi_b), full, own, lo - margin, hi + margin, width)
 
 
-def _planes(st: _Setup, spec: RdfSpec, density: float) -> list[Plane]:
+def _planes(st: RdfSetup, spec: RdfSpec, density: float) -> list[Plane]:
     k = _AXES[spec.axis]
     iu, iv = [d for d in range(3) if d != k]
     eye = np.eye(3)
@@ -266,7 +290,7 @@ def _planes(st: _Setup, spec: RdfSpec, density: float) -> list[Plane]:
     return out
 
 
-def _count(st: _Setup, planes: list[Plane], chunk: int = 8) -> np.ndarray:
+def _count(st: RdfSetup, planes: list[Plane], chunk: int = 16) -> np.ndarray:
     """Pixel counts (nslice, K, 2): layer area, small-particle pixels in it."""
     K = len(st.t_mm)
     small_lut = np.zeros(st.full.model.n_sieves + 1, bool)
@@ -313,7 +337,7 @@ def _summarise(counts: np.ndarray, phi_b: float, block: int = 1) -> dict[str, np
     return dict(phi=phi, g=phi / phi_b, g_mean=mean, g_sd=sd, g_se=se, n_slices=n, area=A, small=S)
 
 
-def _block(st: "_Setup", planes: list[Plane], axis: str) -> int:
+def _block(st: "RdfSetup", planes: list[Plane], axis: str) -> int:
     """Slices per block for the standard error: enough to span the widest small particle."""
     if len(planes) < 2:
         return 1
@@ -322,10 +346,10 @@ def _block(st: "_Setup", planes: list[Plane], axis: str) -> int:
     return max(1, int(np.ceil(st.width / spacing - 1e-9)))
 
 
-def rdf(model: Model, spec: RdfSpec = RdfSpec()) -> RdfResult:
+def rdf(model: Model, spec: RdfSpec = RdfSpec(), setup: RdfSetup | None = None) -> RdfResult:
     """g(t) of thesis section 3.4 from slices (see the module docstring)."""
     t0 = time.perf_counter()
-    st = _setup(model, spec)
+    st = setup or prepare(model, spec)
     planes = _planes(st, spec, spec.density)
     counts = _count(st, planes)
     s = _summarise(counts, st.phi_b, _block(st, planes, spec.axis))
@@ -372,100 +396,96 @@ def form_radius(a: np.ndarray, b: np.ndarray, order: int, dirs: np.ndarray) -> n
     return np.sum(ca * cm + cb * sm, axis=0)
 
 
-def _small_member(model: Model, small: tuple[int, ...], pts: np.ndarray, cache: dict) -> np.ndarray:
-    """Whether each point lies in a particle of the small sieves: cKDTree of their centres (periodic
-    when the box is), then |y| <= r(y/|y|) with the model's complex coefficients (kernels.sh_radius)."""
-    from scipy.spatial import cKDTree
-
-    if "tree" not in cache:
-        ids = np.flatnonzero(np.isin(model.sieve, np.asarray(small)))
-        slicer = Slicer(model)
-        pb = kernels.geometry(model.shape_coeffs, model.shape_nmax, slicer._pairs[:, 0], slicer._pairs[:, 1])
-        rmax = pb[slicer._form[ids], kernels.GEOMETRY_COLUMNS.index("rmax")] * model.scale[ids]
-        c = model.center[ids]
-        if model.periodic:
-            c = np.mod(c, model.box)
-            c = np.minimum(c, np.nextafter(model.box, 0))
-        cache.update(ids=ids, rmax=rmax, reach=float(rmax.max()) * 1.01,
-                     tree=cKDTree(c, boxsize=model.box if model.periodic else None))
-    ids, rmax, tree = cache["ids"], cache["rmax"], cache["tree"]
-    q = np.mod(pts, model.box) if model.periodic else pts
-    if model.periodic:
-        q = np.minimum(q, np.nextafter(model.box, 0))
-    hits = tree.query_ball_point(q, cache["reach"])
-    lens = np.fromiter((len(h) for h in hits), int, len(hits))
-    pi = np.repeat(np.arange(len(pts)), lens)
-    if pi.size == 0:
-        return np.zeros(len(pts), bool)
-    kk = ids[np.concatenate([np.asarray(h, int) for h in hits if h])]
-    y = pts[pi] - model.center[kk]
-    if model.periodic:
-        y -= model.box * np.round(y / model.box)
-    y = np.einsum("nji,nj->ni", model.rotation[kk], y) / model.scale[kk][:, None]
-    ly = np.linalg.norm(y, axis=1)
-    inside = np.zeros(len(pi), bool)
-    near = ly <= rmax[np.searchsorted(ids, kk)] / model.scale[kk] + 1e-12
-    key = model.shape[kk] * 1000 + model.nmax[kk]
-    for kv in np.unique(key[near]):
-        sel = np.flatnonzero(near & (key == kv))
-        d = y[sel] / np.maximum(ly[sel], 1e-300)[:, None]
-        r = kernels.sh_radius(model.shape_coeffs, model.shape_nmax, int(kv // 1000), int(kv % 1000), d)
-        inside[sel] = ly[sel] <= r
-    out = np.zeros(len(pts), bool)
-    np.logical_or.at(out, pi, inside)
-    return out
+def _layer_sampling(spacing: float, r_eff: float, thickness: np.ndarray) -> tuple[int, int, np.ndarray]:
+    """Strata of the volume sample: n_z polar (equal-area) and n_phi azimuthal direction strata
+    whose cells are about `spacing` wide at radius r_eff (mm), and per layer the radial strata of
+    about `spacing` (mm) each."""
+    nz = max(4, int(np.ceil(2 * r_eff / spacing)))
+    nphi = max(8, int(round(np.pi * nz)))
+    nt = np.maximum(1, np.round(np.asarray(thickness) / spacing)).astype(int)
+    return nz, nphi, nt
 
 
-def volume_fractions(model: Model, spec: RdfSpec = RdfSpec(), n_points: int = 1_000_000, seed: int = 1,
-                     chunk: int = 100_000) -> VolumeResult:
-    """Small-particle fraction of each layer directly in the volume, without slices: n_points
-    uniform random points in the box around the RDF particle's outer shell. A point's layer comes
-    from the radii of the particle and its K shell surfaces (the kernels' shell forms, evaluated
-    here with scipy) along the point's body-frame direction; membership in a small particle from a
-    k-d tree of their centres and the point-in-particle test. phi_k = points in layer k and in a
-    small particle / points in layer k, with its binomial standard error. Tests Eq 3.11."""
-    if n_points < 1:
-        raise AnmPostError(f"number of Monte Carlo points must be >= 1, got {n_points}")
+def volume_fractions(model: Model, spec: RdfSpec = RdfSpec(), spacing: float | None = None, replicates: int = 8,
+                     seed: int = 1, setup: "RdfSetup | None" = None) -> VolumeResult:
+    """Small-particle fraction of each layer measured directly in the volume, without slices.
+
+    The layers are the slicer's own surfaces (the RDF particle and its K shell surfaces, star-shaped
+    about the particle centre), so in body-frame spherical coordinates layer k along direction u is
+    the radial interval a_k(u) < r <= b_k(u), a_k = max(r_0..r_{k-1}), b_k = r_k (the labelling
+    rule of the slices: the first layer whose surface contains the point). With s = r^3 / 3 the
+    volume element is ds dOmega, so a point uniform in the layer is (u uniform on the sphere, s
+    uniform in [a^3/3, b^3/3]) with weight (b^3 - a^3)/3 per unit solid angle. The sample is
+    stratified (jittered): z = cos(theta) in n_z strata and phi in n_phi strata (equal-area cells
+    about `spacing` mm wide at the layers; default: the pixel size of spec), one random direction
+    per cell, and per layer round(thickness / spacing) radial strata of s with one random point
+    each. A point counts as small when a particle of the small sieves contains it (the Fortran
+    point labels, anm_slicing_points: cell list and point-in-particle test, no planes).
+
+    phi_k = sum(w * small) / sum(w) per replicate; `replicates` independent randomisations give
+    the mean and its standard error (replicate s.d. / sqrt(replicates)), and the layer volumes
+    sum(w) (mm^3) likewise. Tests Eq 3.11: at rho_s = 1 the slices must give the same phi_k."""
+    if replicates < 2:
+        raise AnmPostError(f"number of replicates must be >= 2 (for a standard error), got {replicates}")
     t0 = time.perf_counter()
-    st = _setup(model, spec)
+    st = setup or prepare(model, spec)
+    h = float(spec.pixel if spacing is None else spacing)
+    if not (h > 0 and np.isfinite(h)):
+        raise AnmPostError(f"volume sample spacing must be positive, got {spacing}")
     K = len(st.t_mm)
     pid = st.pid
-    sh, order = np.array([model.shape[pid]]), np.array([model.nmax[pid]])
-    pa, pb_, _ = kernels.particle_forms(model.shape_coeffs, model.shape_nmax, sh, order, int(max(order[0], 1)))
-    lmax_s = int(min(119, max(24, 2 * order[0])))
-    sa, sb, so, _ = kernels.shell_forms(model.shape_coeffs, model.shape_nmax, sh, order,
-                                        (st.t_mm / model.scale[pid])[None, :], lmax_s)
-    forms = [(pa[:, :, 0], pb_[:, :, 0], int(order[0]))] + \
-        [(sa[:, :, k, 0], sb[:, :, k, 0], int(so[k, 0])) for k in range(K)]
-    rng = np.random.default_rng(seed)
-    n_in, n_small = np.zeros(K, np.int64), np.zeros(K, np.int64)
-    cache: dict = {}
-    rot, c, s = model.rotation[pid], model.center[pid], model.scale[pid]
-    done = 0
-    while done < n_points:
-        m = min(chunk, n_points - done)
-        pts = st.lo + rng.random((m, 3)) * (st.hi - st.lo)
-        y = (pts - c) @ rot / s
-        ly = np.linalg.norm(y, axis=1)
-        d = y / np.maximum(ly, 1e-300)[:, None]
-        lay = np.zeros(m, np.int64)
-        # candidates: outside the particle, inside the outermost shell; then the innermost
-        # enclosing shell gives the layer
-        cand = np.flatnonzero(ly > form_radius(*forms[0], d))
-        cand = cand[ly[cand] <= form_radius(*forms[K], d[cand])]
-        lay[cand] = K
-        for k in range(K - 1, 0, -1):
-            sub = cand[ly[cand] <= form_radius(*forms[k], d[cand])]
-            lay[sub] = k
-            cand = sub
-        sel = lay > 0
-        is_small = _small_member(model, st.small, pts[sel], cache)
-        n_in += np.bincount(lay[sel], minlength=K + 1)[1:K + 1]
-        n_small += np.bincount(lay[sel][is_small], minlength=K + 1)[1:K + 1]
-        done += m
-    phi = np.where(n_in > 0, n_small / np.maximum(n_in, 1), np.nan)
-    se = np.sqrt(phi * (1 - phi) / np.maximum(n_in, 1))
-    return VolumeResult(phi=phi, phi_se=se, points=n_in, n_points=n_points, seconds=time.perf_counter() - t0)
+    a, b, orders, _ = st.own.layer_forms(0)
+    rot, c, s = model.rotation[pid], model.center[pid], float(model.scale[pid])
+    r_eff = float(np.sqrt(np.mean(kernels.form_radii(a, b, orders, _fibonacci(4000))[:, K] ** 2))) * s
+    nz, nphi, nt = _layer_sampling(h, r_eff, np.diff(np.concatenate([[0.0], st.t_mm])))
+    # the small particles and their forms (those of the full model)
+    full = st.full
+    pa, pb, pbounds = full._particle_forms()
+    ids = np.flatnonzero(np.isin(model.sieve, np.asarray(st.small)))
+    porder = full._pairs[:, 1].astype(np.int32)
+    pform = full._form[ids] + 1
+    cell = 4 * np.pi / (nz * nphi)
+    W = np.zeros((replicates, K))
+    S = np.zeros((replicates, K))
+    npts = 0
+    block = max(1, 1_000_000 // (nphi * int(nt.sum())))          # polar strata per batch of points
+    for rep in range(replicates):
+        rng = np.random.default_rng([int(seed), rep])
+        for i0 in range(0, nz, block):
+            iz = np.arange(i0, min(nz, i0 + block))
+            z = -1 + (iz[:, None] + rng.random((len(iz), nphi))) * (2.0 / nz)
+            ph = (np.arange(nphi)[None, :] + rng.random((len(iz), nphi))) * (2 * np.pi / nphi)
+            z, ph = z.ravel(), ph.ravel()
+            sz = np.sqrt(np.maximum(0.0, 1 - z * z))
+            u = np.stack([sz * np.cos(ph), sz * np.sin(ph), z], axis=1)
+            R = kernels.form_radii(a, b, orders, u)               # (ndir, 1 + K), shape units
+            inner = np.maximum.accumulate(R, axis=1)              # a_k = max(r_0 .. r_{k-1}) in column k - 1
+            pts, wts, lay = [], [], []
+            for k in range(1, K + 1):
+                s_lo = inner[:, k - 1] ** 3 / 3
+                ds = np.maximum(0.0, R[:, k] ** 3 / 3 - s_lo)
+                keep = np.flatnonzero(ds > 0)
+                for l in range(nt[k - 1]):
+                    tau = (l + rng.random(keep.size)) / nt[k - 1]
+                    r = np.cbrt(3 * (s_lo[keep] + tau * ds[keep]))
+                    pts.append(u[keep] * r[:, None])
+                    wts.append(ds[keep] * (cell / nt[k - 1]))
+                    lay.append(np.full(keep.size, k - 1))
+            y = np.concatenate(pts)
+            x = c + s * (y @ rot.T)
+            lab = kernels.point_labels(pa, pb, porder, pbounds, pform, model.center[ids], model.rotation[ids],
+                                       model.scale[ids], model.box, model.periodic, x)
+            w, k = np.concatenate(wts), np.concatenate(lay)
+            W[rep] += np.bincount(k, weights=w, minlength=K)
+            S[rep] += np.bincount(k, weights=w * (lab > 0), minlength=K)
+            npts += len(x)
+    phi_r = S / np.where(W > 0, W, np.nan)
+    vol_r = W * s ** 3
+    sq = np.sqrt(replicates)
+    return VolumeResult(phi=phi_r.mean(axis=0), phi_se=phi_r.std(axis=0, ddof=1) / sq,
+                        volume=vol_r.mean(axis=0), volume_se=vol_r.std(axis=0, ddof=1) / sq, replicates=replicates,
+                        spacing=h, strata=(nz, nphi, tuple(int(v) for v in nt)), n_points=npts,
+                        per_replicate=phi_r, seconds=time.perf_counter() - t0)
 
 
 # -- convergence in rho_s ----------------------------------------------------------------------
@@ -491,7 +511,8 @@ class ConvergenceResult:
 
 
 def convergence(model: Model, spec: RdfSpec = RdfSpec(),
-                densities: Sequence[float] = (0.01, 0.05, 0.1, 0.25, 0.5, 1.0)) -> ConvergenceResult:
+                densities: Sequence[float] = (0.01, 0.05, 0.1, 0.25, 0.5, 1.0),
+                setup: RdfSetup | None = None) -> ConvergenceResult:
     """g(t) at several slice densities (thesis Figs 3.9, 3.10, 3.12, 3.13). The slices of every
     density are a subset of the union labelled once: each plane is labelled once even when several
     densities use it."""
@@ -499,7 +520,7 @@ def convergence(model: Model, spec: RdfSpec = RdfSpec(),
     if dens.size == 0 or dens[0] <= 0 or dens[-1] > 1:
         raise AnmPostError(f"slice densities must be in (0, 1], got {list(densities)}")
     t0 = time.perf_counter()
-    st = _setup(model, spec)
+    st = setup or prepare(model, spec)
     per = [_planes(st, spec, float(d)) for d in dens]
     key = {}
     for planes in per:
@@ -545,22 +566,39 @@ def _save(fig, plt, path: str | Path, option: str) -> Path:
 
 def plot_rdf(res: RdfResult, path: str | Path, volume: VolumeResult | None = None, title: str = "") -> Path:
     """Bar plot of g per layer (bar width = layer thickness) with the per-slice standard deviation as
-    error bars (thesis Fig 3.8); the 3D Monte Carlo values as points when given; g = 1 dashed."""
+    error bars (thesis Fig 3.8); g = 1 dashed. With the 3D values (volume_fractions) they are drawn
+    as points, and a second panel shows the check of Eq 3.11: g_slices - g_3D per layer against
+    the slices' standard error (band) with the 3D standard error as error bars."""
     plt = _figure()
-    fig, ax = plt.subplots(figsize=(6.4, 4))
+    if volume is None:
+        fig, ax = plt.subplots(figsize=(6.4, 4))
+    else:
+        fig, (ax, ax2) = plt.subplots(2, 1, figsize=(6.4, 6.4), sharex=True, height_ratios=(2, 1))
     width = res.t_outer - res.t_inner
     ax.bar(res.t_inner, res.g, width=width, align="edge", color="#9ecae1", edgecolor="#3182bd",
            label=f"slices (rho_s = {res.density:g}, N = {len(res.positions)})")
     ax.errorbar(res.t_mid, res.g, yerr=res.g_sd, fmt="none", ecolor="#08306b", capsize=3, label="per-slice s.d.")
     if volume is not None:
-        ax.errorbar(res.t_mid, volume.phi / res.phi_b, yerr=volume.phi_se / res.phi_b, fmt="o", ms=4,
-                    color="#d62728", capsize=2, label="3D (Monte Carlo)")
+        g3, se3 = volume.phi / res.phi_b, volume.phi_se / res.phi_b
+        ax.errorbar(res.t_mid, g3, yerr=se3, fmt="o", ms=4, color="#d62728", capsize=2,
+                    label="3D (volume sample, no slices)")
+        edges = np.concatenate([res.t_inner, res.t_outer[-1:]])
+        se = np.concatenate([res.g_se, res.g_se[-1:]])
+        ax2.fill_between(edges, -se, se, step="post", color="#9ecae1", alpha=0.6,
+                         label="+- standard error of the slice estimate")
+        ax2.errorbar(res.t_mid, res.g - g3, yerr=se3, fmt="o", ms=4, color="#d62728", capsize=2,
+                     label="g_slices - g_3D (bars: 3D standard error)")
+        ax2.axhline(0.0, color="grey", lw=1)
+        ax2.set_xlabel("distance t from the particle surface (mm)")
+        ax2.set_ylabel("g_slices - g_3D")
+        ax2.legend(fontsize=7, loc="lower left")
+    else:
+        ax.set_xlabel("distance t from the particle surface (mm)")
     ax.axhline(1.0, ls="--", color="grey", lw=1)
-    ax.set_xlabel("distance t from the particle surface (mm)")
     ax.set_ylabel("g(t) = phi_shell / phi_B")
     ax.set_title(title or f"g(t) around particle {res.particle} (L = {res.length:.3g} mm, "
                           f"phi_B = {res.phi_b:.3f}, R_s = {res.pixel:g} mm)", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     return _save(fig, plt, path, "--png")
 

@@ -23,10 +23,13 @@ module anm_api_slice
    use anm_slicing_form, only: slice_form_type, new_slice_form, new_slice_form_bounds
    use anm_slicing_kernel, only: slice_labels, slice_stats_type
    use anm_slicing_shells, only: build_shell_forms
+   use anm_slicing_stack, only: slice_stack_type, new_slice_stack, stack_radii
+   use anm_slicing_points, only: point_labels
    implicit none
    private
 
-   public :: api_sh_radius, api_geometry, api_particle_forms, api_shell_forms, api_slice, message_length
+   public :: api_sh_radius, api_geometry, api_particle_forms, api_shell_forms, api_slice, api_form_radii, &
+      & api_point_labels, message_length
 
    !> Length of the message buffers (written as the literal 512 in the dummy declarations,
    !> which f2py reads without resolving parameters).
@@ -333,6 +336,128 @@ contains
       owner = io
       stats = real([st%queried, st%candidates, st%tests, st%evaluations], c_double)
    end subroutine api_slice
+
+   !> Radii of nform forms (sharing one body frame, e.g. a particle and its layers) along ndir
+   !> directions, all forms from one Legendre recursion per direction (anm_slicing_stack).
+   subroutine api_form_radii(lmax, nform, a, b, order, ndir, dirs, r, status, message)
+      !> Size of the coefficient arrays and number of forms.
+      integer(c_int), intent(in) :: lmax, nform
+      !> Form coefficients (0:lmax, 0:lmax, nform).
+      real(c_double), intent(in) :: a(0:lmax, 0:lmax, nform), b(0:lmax, 0:lmax, nform)
+      !> Order of each form.
+      integer(c_int), intent(in) :: order(nform)
+      !> Number of directions.
+      integer(c_int), intent(in) :: ndir
+      !> Directions (3, ndir), body frame, non-zero (need not be normalised).
+      real(c_double), intent(in) :: dirs(3, ndir)
+      !> r(ndir, nform) in shape units.
+      real(c_double), intent(out) :: r(ndir, nform)
+      !> 0 on success.
+      integer(c_int), intent(out) :: status
+      !> Error message.
+      character(len=512), intent(out) :: message
+      type(sh_expansion_type), allocatable :: sh(:)
+      type(slice_stack_type) :: stack
+      real(wp), allocatable :: rk(:)
+      integer :: k, no
+
+      r = 0.0_c_double
+      status = 0
+      message = ""
+      if (nform < 1 .or. lmax < 0) then
+         call set_error(status, message, 4, "form_radii: no forms")
+         return
+      end if
+      if (any(sum(dirs**2, dim=1) <= 0.0_c_double)) then
+         call set_error(status, message, 4, "form_radii: zero direction")
+         return
+      end if
+      allocate (sh(nform))
+      do k = 1, nform
+         no = order(k)
+         if (no < 0 .or. no > lmax) then
+            call set_error(status, message, 4, "form_radii: form order out of range 0..lmax")
+            return
+         end if
+         call new_sh_expansion_real(sh(k), real(a(0:no, 0:no, k), wp), real(b(0:no, 0:no, k), wp))
+      end do
+      call new_slice_stack(stack, sh)
+      !$omp parallel default(none) private(k, rk) shared(stack, ndir, dirs, r)
+      allocate (rk(stack%npad))
+      !$omp do schedule(static)
+      do k = 1, ndir
+         call stack_radii(stack, real(dirs(:, k), wp), rk)
+         r(k, :) = rk(1:stack%nform)
+      end do
+      !$omp end do
+      !$omp end parallel
+   end subroutine api_form_radii
+
+   !> Label npoint points with a particle containing them (anm_slicing_points): 1-based particle
+   !> id, 0 for none.
+   subroutine api_point_labels(lmax, nform, a, b, order, bounds, np, form, center, rotation, scale, box, periodic, &
+                               npoint, points, label, status, message)
+      !> Size of the coefficient arrays and number of forms.
+      integer(c_int), intent(in) :: lmax, nform
+      !> Form coefficients (0:lmax, 0:lmax, nform).
+      real(c_double), intent(in) :: a(0:lmax, 0:lmax, nform), b(0:lmax, 0:lmax, nform)
+      !> Order of each form.
+      integer(c_int), intent(in) :: order(nform)
+      !> Certified bounds (8, nform).
+      real(c_double), intent(in) :: bounds(8, nform)
+      !> Number of particles.
+      integer(c_int), intent(in) :: np
+      !> Form of each particle (1-based).
+      integer(c_int), intent(in) :: form(np)
+      !> Centres (3, np), mm.
+      real(c_double), intent(in) :: center(3, np)
+      !> Rotations body -> world (3, 3, np).
+      real(c_double), intent(in) :: rotation(3, 3, np)
+      !> mm per shape unit.
+      real(c_double), intent(in) :: scale(np)
+      !> Box edges (mm).
+      real(c_double), intent(in) :: box(3)
+      !> 1 for periodic boundaries.
+      integer(c_int), intent(in) :: periodic
+      !> Number of points.
+      integer(c_int), intent(in) :: npoint
+      !> Points (3, npoint), mm.
+      real(c_double), intent(in) :: points(3, npoint)
+      !> Particle containing each point (1-based), 0 for none.
+      integer(c_int), intent(out) :: label(npoint)
+      !> 0 on success.
+      integer(c_int), intent(out) :: status
+      !> Error message.
+      character(len=512), intent(out) :: message
+      type(slice_form_type), allocatable :: forms(:)
+      type(sh_expansion_type) :: sh
+      type(error_type), allocatable :: error
+      integer, allocatable :: lab(:)
+      integer :: k, no
+
+      status = 0
+      message = ""
+      label = 0
+      allocate (forms(nform))
+      do k = 1, nform
+         no = order(k)
+         if (no < 0 .or. no > lmax) then
+            call set_error(status, message, 4, "point_labels: form order out of range 0..lmax")
+            return
+         end if
+         call new_sh_expansion_real(sh, real(a(0:no, 0:no, k), wp), real(b(0:no, 0:no, k), wp))
+         call new_slice_form_bounds(forms(k), sh, real(bounds(1, k), wp), real(bounds(2, k), wp), &
+                                    real(bounds(3:5, k), wp), real(bounds(6:8, k), wp))
+      end do
+      allocate (lab(npoint))
+      call point_labels(forms, form, real(center, wp), real(rotation, wp), real(scale, wp), real(box, wp), &
+                        periodic /= 0, real(points, wp), lab, error)
+      if (allocated(error)) then
+         call set_error(status, message, error%stat, error%message)
+         return
+      end if
+      label = lab
+   end subroutine api_point_labels
 
    !> Expansion of shape ishape (1-based) truncated at `order`.
    subroutine get_shape(ncoef, nshape, coeffs, nmax, ishape, order, sh, status, message)

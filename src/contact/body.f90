@@ -36,6 +36,7 @@ module anm_contact_body
 
    public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
+   public :: node_size, nd_dir, nd_cosa, nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
    integer, parameter :: leaf_level = 4
@@ -45,6 +46,14 @@ module anm_contact_body
    integer, parameter :: cells_per_leaf = 8
    !> Thesis default N_ext.
    integer, parameter :: default_next = 40
+
+   !> Layout of a column of `contact_body_type%node` (one patch of levels 0..leaf_level): cap
+   !> centre direction (3), cos and sin of the cap half-angle; oriented box of the surface piece:
+   !> centre (3), radius of a ball about the centre containing the box, axes (3 x 3, columns; the
+   !> third is the surface normal at the patch centre), half-extents (3); sector ball centre (3)
+   !> and radius; r at the cap centre direction.
+   integer, parameter :: nd_dir = 1, nd_cosa = 4, nd_sina = 5, nd_c = 6, nd_r = 9, nd_e = 10, nd_h = 19, &
+                         nd_ball = 22, nd_brad = 25, nd_rc = 26, node_size = 26
 
    !> Immutable per-(shape, order) contact data, shared by all particles of that shape and by all
    !> threads.
@@ -61,6 +70,8 @@ module anm_contact_body
       real(wp) :: lipschitz = 0.0_wp
       !> Certified bound of |d2r/ds2| along great circles, N^2 M.
       real(wp) :: curvature = 0.0_wp
+      !> Certified bound of |d3r/ds3| along great circles, N^3 M.
+      real(wp) :: third = 0.0_wp
       !> Guaranteed extent box (body frame): every surface point lies inside [box_lo, box_hi].
       real(wp) :: box_lo(3) = 0.0_wp, box_hi(3) = 0.0_wp
       !> Thesis extent box from the N_ext angular scan (slightly inside the true box).
@@ -88,6 +99,12 @@ module anm_contact_body
       real(wp), allocatable :: row_ct(:), row_st(:), row_cosa(:), row_sina(:)
       !> Per patch column: cos and sin of the mid azimuth.
       real(wp), allocatable :: col_cp(:), col_sp(:)
+      !> Per patch of levels 0..leaf_level (same indexing as `dir`), packed for the contact
+      !> traversal (layout nd_*, node_size rows): the cap and sector ball (copies of dir, cosa,
+      !> sina, ball, brad), r at the cap centre direction (a surface point) and the oriented box
+      !> of the surface piece {r(u) u : u in patch}: every such point x has |e_i . (x - c)| <= h_i
+      !> (certified, `surface_boxes`).
+      real(wp), allocatable :: node(:, :)
    end type contact_body_type
 
 contains
@@ -221,6 +238,10 @@ contains
    end subroutine sector_ball
 
    !> Build the contact data of `shape` truncated to order `nused` (default: all of it).
+   !> Pass 1 samples r on the whole certification grid (for the certified bound M); pass 2 goes
+   !> through the grid one leaf row (8 cell rows) at a time, sampling the derivatives of r there,
+   !> and sets the cell bounds, the stored bounds of the leaf and deeper patches and the leaf
+   !> boxes of that row; coarser patches follow from their children.
    subroutine new_contact_body(body, shape, error, nused, next)
       !> Contact data to build.
       type(contact_body_type), intent(out) :: body
@@ -232,9 +253,11 @@ contains
       integer, intent(in), optional :: nused
       !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
       integer, intent(in), optional :: next
-      real(wp), allocatable :: rg(:, :), gg(:, :), clo(:, :), chi(:, :)
-      integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, ic, jc, np_tot, kc, nd
-      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, dc, smx, hi, lo, ang, mu, d3(3)
+      integer, parameter :: kb = cells_per_leaf
+      real(wp), allocatable :: rg(:, :), rt(:, :), rp(:, :), h11(:, :), h12(:, :), h22(:, :), clo(:, :), chi(:, :), &
+                               dcr(:), obb_c(:, :), obb_e(:, :, :), obb_h(:, :), trig(:, :), bv(:, :, :), w(:, :)
+      integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, np_tot, kc, nd, ip, i0, nr
+      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, smx, hi, lo, ang, mu, d3(3), margin, rbound
       real(wp) :: e(3)
 
       if (present(nused)) then
@@ -251,8 +274,9 @@ contains
       npg = cells_per_leaf * nleaf_p
       dth = pi / ntg
       dph = two_pi / npg
-      allocate (rg(0:ntg, 0:npg), gg(0:ntg, 0:npg))
-      call synthesize_regular(body%shape, ntg, npg, rg, gg)
+      ! pass 1: r on the grid and the certified bounds of its derivatives along great circles
+      allocate (rg(0:ntg, 0:npg))
+      call synthesize_rows(body%shape, npg, ntg, 0, ntg, rg)
       smin = minval(rg)
       smax = maxval(rg)
       ms = 0.5_wp * (smax - smin)
@@ -266,43 +290,82 @@ contains
       if (n == 0) mm = 0.0_wp
       body%lipschitz = n * mm
       body%curvature = real(n, wp)**2 * mm
-      ! cell bounds
-      allocate (clo(ntg, npg), chi(ntg, npg))
-      do ic = 1, ntg
-         if ((ic - 1) * dth <= 0.5_wp * pi .and. ic * dth >= 0.5_wp * pi) then
+      body%third = real(n, wp)**3 * mm
+      ! |r| <= |c| + M with c the mid value
+      rbound = abs(0.5_wp * (smax + smin)) + mm
+      margin = 1.0e-11_wp * smax
+      ! d_c per cell row: every point of a cell is within d_c of a corner along a great circle
+      allocate (dcr(ntg))
+      do i = 1, ntg
+         if ((i - 1) * dth <= 0.5_wp * pi .and. i * dth >= 0.5_wp * pi) then
             smx = 1.0_wp
          else
-            smx = max(sin((ic - 1) * dth), sin(ic * dth))
+            smx = max(sin((i - 1) * dth), sin(i * dth))
          end if
-         dc = 0.5_wp * (dth + smx * dph)
-         do jc = 1, npg
-            hi = max(rg(ic - 1, jc - 1) + gg(ic - 1, jc - 1) * dc, rg(ic, jc - 1) + gg(ic, jc - 1) * dc, &
-                     rg(ic - 1, jc) + gg(ic - 1, jc) * dc, rg(ic, jc) + gg(ic, jc) * dc)
-            lo = min(rg(ic - 1, jc - 1) - gg(ic - 1, jc - 1) * dc, rg(ic, jc - 1) - gg(ic, jc - 1) * dc, &
-                     rg(ic - 1, jc) - gg(ic - 1, jc) * dc, rg(ic, jc) - gg(ic, jc) * dc)
-            chi(ic, jc) = hi + 0.5_wp * body%curvature * dc**2
-            clo(ic, jc) = lo - 0.5_wp * body%curvature * dc**2
-         end do
+         dcr(i) = 0.5_wp * (dth + smx * dph)
       end do
-      ! deep levels: bounds only, rounded outwards to single precision
+      ! sin and cos of the grid's polar angles (rows 1, 2) and azimuths (rows 3, 4)
+      allocate (trig(4, 0:max(ntg, npg)))
+      do i = 0, ntg
+         trig(1, i) = sin(pi * i / ntg)
+         trig(2, i) = cos(pi * i / ntg)
+      end do
+      do j = 0, npg
+         trig(3, j) = sin(two_pi * mod(j, npg) / npg)
+         trig(4, j) = cos(two_pi * mod(j, npg) / npg)
+      end do
+      ! storage
       nd = 0
       do l = leaf_level + 1, stored_level
          body%doff(l) = nd
          nd = nd + patch_rows(l) * patch_cols(l)
       end do
       body%doff(stored_level + 1) = nd
-      allocate (body%dlo(nd), body%dhi(nd))
-      do l = leaf_level + 1, stored_level
-         kc = cells_per_leaf / 2**(l - leaf_level)
-         do j = 1, patch_cols(l)
-            do i = 1, patch_rows(l)
-               k = body%doff(l) + (j - 1) * patch_rows(l) + i
-               lo = minval(clo((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
-               hi = maxval(chi((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
-               body%dlo(k) = real(lo, sp)
-               if (real(body%dlo(k), wp) > lo) body%dlo(k) = nearest(body%dlo(k), -1.0_sp)
-               body%dhi(k) = real(hi, sp)
-               if (real(body%dhi(k), wp) < hi) body%dhi(k) = nearest(body%dhi(k), 1.0_sp)
+      np_tot = 0
+      do l = 0, leaf_level
+         body%off(l) = np_tot
+         np_tot = np_tot + patch_rows(l) * patch_cols(l)
+      end do
+      body%off(leaf_level + 1) = np_tot
+      allocate (body%dlo(nd), body%dhi(nd), body%dir(3, np_tot), body%cosa(np_tot), body%sina(np_tot), &
+                body%rlo(np_tot), body%rhi(np_tot), body%ball(3, np_tot), body%brad(np_tot), &
+                body%node(node_size, np_tot), obb_c(3, np_tot), obb_e(3, 3, np_tot), obb_h(3, np_tot))
+      ! pass 2, one leaf row at a time
+      allocate (rt(0:kb, 0:npg), rp(0:kb, 0:npg), h11(0:kb, 0:npg), h12(0:kb, 0:npg), h22(0:kb, 0:npg), &
+                clo(kb, npg), chi(kb, npg), bv(0:kb, 0:npg, 18), w((kb + 1)**2, 18))
+      do ip = 1, nleaf_t
+         i0 = (ip - 1) * kb
+         call synthesize_rows(body%shape, npg, ntg, i0, i0 + kb, rt=rt, rp=rp, h11=h11, h12=h12, h22=h22)
+         call cell_bounds(body, rg(i0:i0 + kb, :), rt, rp, h11, h12, h22, dcr(i0 + 1:i0 + kb), i0 == 0, &
+                          i0 + kb == ntg, margin, clo, chi)
+         call band_vectors(i0, trig, rg(i0:i0 + kb, :), rt, rp, h11, h12, h22, bv)
+         ! leaf patches of this row and the deeper stored levels (rounded outwards to single)
+         do j = 1, nleaf_p
+            k = patch_index(body, leaf_level, ip, j)
+            body%rlo(k) = minval(clo(:, (j - 1) * kb + 1:j * kb))
+            body%rhi(k) = maxval(chi(:, (j - 1) * kb + 1:j * kb))
+            do l = 1, 18
+               do i = 0, kb
+                  w(i * (kb + 1) + 1:(i + 1) * (kb + 1), l) = bv(:, (j - 1) * kb + i, l)
+               end do
+            end do
+            call leaf_box(body, w, i0 > 0 .and. i0 + kb < ntg, maxval(dcr(i0 + 1:i0 + kb)), rbound, margin, &
+                          obb_c(:, k), obb_e(:, :, k), obb_h(:, k))
+            body%node(nd_rc, k) = rg(i0 + kb / 2, (j - 1) * kb + kb / 2)
+         end do
+         do l = leaf_level + 1, stored_level
+            kc = cells_per_leaf / 2**(l - leaf_level)
+            nr = 2**(l - leaf_level)
+            do j = 1, patch_cols(l)
+               do i = 1, nr
+                  k = body%doff(l) + (j - 1) * patch_rows(l) + (ip - 1) * nr + i
+                  lo = minval(clo((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+                  hi = maxval(chi((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
+                  body%dlo(k) = real(lo, sp)
+                  if (real(body%dlo(k), wp) > lo) body%dlo(k) = nearest(body%dlo(k), -1.0_sp)
+                  body%dhi(k) = real(hi, sp)
+                  if (real(body%dhi(k), wp) < hi) body%dhi(k) = nearest(body%dhi(k), 1.0_sp)
+               end do
             end do
          end do
       end do
@@ -324,24 +387,13 @@ contains
             body%col_sp(body%coff(l) + j) = sin(two_pi * (j - 0.5_wp) / patch_cols(l))
          end do
       end do
-      ! patch storage
-      np_tot = 0
-      do l = 0, leaf_level
-         body%off(l) = np_tot
-         np_tot = np_tot + patch_rows(l) * patch_cols(l)
-      end do
-      body%off(leaf_level + 1) = np_tot
-      allocate (body%dir(3, np_tot), body%cosa(np_tot), body%sina(np_tot), body%rlo(np_tot), body%rhi(np_tot), &
-                body%ball(3, np_tot), body%brad(np_tot))
+      ! coarser patches from their children; caps and sector balls of every stored-cap level
       do l = leaf_level, 0, -1
          kc = cells_per_leaf * 2**(leaf_level - l)
          do j = 1, patch_cols(l)
             do i = 1, patch_rows(l)
                k = patch_index(body, l, i, j)
-               if (l == leaf_level) then
-                  body%rlo(k) = minval(clo((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
-                  body%rhi(k) = maxval(chi((i - 1) * kc + 1:i * kc, (j - 1) * kc + 1:j * kc))
-               else
+               if (l < leaf_level) then
                   body%rlo(k) = min(body%rlo(patch_index(body, l + 1, 2 * i - 1, 2 * j - 1)), &
                                     body%rlo(patch_index(body, l + 1, 2 * i, 2 * j - 1)), &
                                     body%rlo(patch_index(body, l + 1, 2 * i - 1, 2 * j)), &
@@ -350,6 +402,8 @@ contains
                                     body%rhi(patch_index(body, l + 1, 2 * i, 2 * j - 1)), &
                                     body%rhi(patch_index(body, l + 1, 2 * i - 1, 2 * j)), &
                                     body%rhi(patch_index(body, l + 1, 2 * i, 2 * j)))
+                  call parent_box(body, l, i, j, obb_c, obb_e, obb_h, margin)
+                  body%node(nd_rc, k) = rg((i - 1) * kc + kc / 2, (j - 1) * kc + kc / 2)
                end if
                call patch_cap(pi * (i - 1) / patch_rows(l), pi * i / patch_rows(l), &
                               two_pi * (j - 1) / patch_cols(l), two_pi * j / patch_cols(l), &
@@ -366,6 +420,17 @@ contains
                           //to_string(body%r_min)//" <= 0)", error_code%not_star)
          return
       end if
+      do k = 1, np_tot
+         body%node(nd_dir:nd_dir + 2, k) = body%dir(:, k)
+         body%node(nd_cosa, k) = body%cosa(k)
+         body%node(nd_sina, k) = body%sina(k)
+         body%node(nd_c:nd_c + 2, k) = obb_c(:, k)
+         body%node(nd_r, k) = norm2(obb_h(:, k)) * (1.0_wp + 1.0e-12_wp)
+         body%node(nd_e:nd_e + 8, k) = reshape(obb_e(:, :, k), [9])
+         body%node(nd_h:nd_h + 2, k) = obb_h(:, k)
+         body%node(nd_ball:nd_ball + 2, k) = body%ball(:, k)
+         body%node(nd_brad, k) = body%brad(k)
+      end do
       ! guaranteed box from the leaf sectors: max of x.e over a sector <= rho_max(u.e) * max_cap(u.e)
       body%box_lo = huge(1.0_wp)
       body%box_hi = -huge(1.0_wp)
@@ -392,66 +457,352 @@ contains
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body
 
-   !> r and |grad r| on the regular grid theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np
-   !> (j = 0..np, column np repeating column 0): per ring the sums over degree, then per azimuth
-   !> the sums over order with a cos/sin table.
-   pure subroutine synthesize_regular(shape, nt, np, r, g)
+   !> Certified bounds of r over the cells of one leaf row (grid rows 0..kb of the band). First
+   !> order with the Bernstein curvature H = N^2 M:
+   !>     r <= max_k (r_k + |grad r_k| d_c) + H d_c^2/2   (k the cell corners);
+   !> second order (cells not touching a pole) with the sampled Hessian and T = N^3 M >= |r'''|:
+   !>     r <= max_k (r_k + |grad r_k| d_c + max(lambda_max(Hess r_k), 0) d_c^2/2) + T d_c^3/6,
+   !> symmetrically for the minimum; the tighter of the two is kept.
+   pure subroutine cell_bounds(body, rg, rt, rp, h11, h12, h22, dcr, north, south, margin, clo, chi)
+      type(contact_body_type), intent(in) :: body
+      !> r, gradient and Hessian on the band's grid rows (0:kb, 0:npg).
+      real(wp), intent(in) :: rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), h11(0:, 0:), h12(0:, 0:), h22(0:, 0:)
+      !> d_c of the band's cell rows.
+      real(wp), intent(in) :: dcr(:)
+      !> The band's first (last) grid row is the north (south) pole.
+      logical, intent(in) :: north, south
+      !> Rounding margin.
+      real(wp), intent(in) :: margin
+      !> Lower and upper bounds per cell (kb, npg).
+      real(wp), intent(out) :: clo(:, :), chi(:, :)
+      real(wp), allocatable :: g(:, :), qhi(:, :), qlo(:, :)
+      real(wp) :: dc, hi, lo, c2, c3
+      integer :: ic, jc, kb, npg, a, b
+      kb = size(clo, 1)
+      npg = size(clo, 2)
+      allocate (g(0:kb, 0:npg), qhi(0:kb, 0:npg), qlo(0:kb, 0:npg))
+      g(:, :) = sqrt(rt**2 + rp**2)
+      ! largest and smallest eigenvalue of the Hessian, clipped at 0
+      qhi(:, :) = max(0.0_wp, 0.5_wp * (h11 + h22) + sqrt((0.5_wp * (h11 - h22))**2 + h12**2))
+      qlo(:, :) = min(0.0_wp, 0.5_wp * (h11 + h22) - sqrt((0.5_wp * (h11 - h22))**2 + h12**2))
+      do ic = 1, kb
+         dc = dcr(ic)
+         c2 = 0.5_wp * body%curvature * dc**2
+         c3 = body%third * dc**3 / 6.0_wp + margin
+         do jc = 1, npg
+            hi = -huge(1.0_wp)
+            lo = huge(1.0_wp)
+            do b = jc - 1, jc
+               do a = ic - 1, ic
+                  hi = max(hi, rg(a, b) + g(a, b) * dc)
+                  lo = min(lo, rg(a, b) - g(a, b) * dc)
+               end do
+            end do
+            chi(ic, jc) = hi + c2
+            clo(ic, jc) = lo - c2
+            if ((ic > 1 .or. .not. north) .and. (ic < kb .or. .not. south)) then
+               hi = -huge(1.0_wp)
+               lo = huge(1.0_wp)
+               do b = jc - 1, jc
+                  do a = ic - 1, ic
+                     hi = max(hi, rg(a, b) + g(a, b) * dc + 0.5_wp * qhi(a, b) * dc**2)
+                     lo = min(lo, rg(a, b) - g(a, b) * dc + 0.5_wp * qlo(a, b) * dc**2)
+                  end do
+               end do
+               chi(ic, jc) = min(chi(ic, jc), hi + c3)
+               clo(ic, jc) = max(clo(ic, jc), lo - c3)
+            end if
+         end do
+      end do
+   end subroutine cell_bounds
+
+   !> Oriented box of the surface piece of a leaf patch from its (kb+1) x (kb+1) grid points.
+   !> The frame is the surface normal n at the patch centre (a grid point) and two tangents. For
+   !> a unit vector e, f(u) = e . (r(u) u) restricted to a unit-speed great circle is f = r w with
+   !> w = e . u, w'' = -w and w^2 + w'^2 <= 1, so (Cauchy-Schwarz, with the Bernstein bounds
+   !> G >= |r'|, H >= |r''|, T >= |r'''|)
+   !>     f'' = (r'' - r) w + 2 r' w',              |f''| <= H_f = sqrt((H + r_max)^2 + 4 G^2),
+   !>     f''' = (r''' - 3 r') w + (3 r'' - r) w',  |f'''| <= T_f = sqrt((T + 3 G)^2 + (3 H + r_max)^2)
+   !> (r_max here any bound of |r|). Every point of a grid cell is within d_c of a corner k along
+   !> a great circle, so over the cell
+   !>     f <= max_k (f_k + |grad f_k| d_c) + H_f d_c^2/2   (first order), and
+   !>     f <= max_k (f_k + |grad f_k| d_c + max(lambda_max(Hess f_k), 0) d_c^2/2) + T_f d_c^3/6
+   !> (second order, patches off the poles), symmetrically for the minimum; the tighter is kept.
+   !> With g = (r_theta, r_phi/sin theta) and h the covariant Hessian of r in the frame
+   !> (e_theta, e_phi): grad f_i = e . X_i with X_1 = r_theta u + r e_theta,
+   !> X_2 = r_phi/sin theta u + r e_phi, and Hess f_ij = e . Y_ij with
+   !> Y_ij = (h_ij - r delta_ij) u + g_i e_j + g_j e_i (`band_vectors`).
+   pure subroutine leaf_box(body, w, second, d, rbound, margin, c, e, h)
+      type(contact_body_type), intent(in) :: body
+      !> The patch's grid points (kb+1)^2 of `band_vectors`: x (1:3), X_1 (4:6), X_2 (7:9),
+      !> Y_11 (10:12), Y_12 (13:15), Y_22 (16:18).
+      real(wp), intent(in) :: w(:, :)
+      !> Second order allowed (the patch does not touch a pole).
+      logical, intent(in) :: second
+      !> Largest d_c of the patch's cells, bound of |r|, rounding margin.
+      real(wp), intent(in) :: d, rbound, margin
+      !> Box centre, axes (columns), half-extents.
+      real(wp), intent(out) :: c(3), e(3, 3), h(3)
+      integer :: npt, q, m, ic
+      real(wp) :: hf, tf, lo(3), hi(3), lo2, hi2, f, g1, g2, g, a11, a12, a22, am, ar, e1, e2, e3, q2(3), u(3)
+      npt = size(w, 1)
+      hf = sqrt((body%curvature + rbound)**2 + 4.0_wp * body%lipschitz**2)
+      tf = sqrt((body%third + 3.0_wp * body%lipschitz)**2 + (3.0_wp * body%curvature + rbound)**2)
+      ! frame: normal at the centre grid point, X_1 x X_2
+      ic = (npt + 1) / 2
+      u = w(ic, 1:3) / norm2(w(ic, 1:3))
+      e = frame(cross(w(ic, 4:6), w(ic, 7:9)), u, w(ic, 4:6) - dot_product(w(ic, 4:6), u) * u, &
+                w(ic, 7:9) - dot_product(w(ic, 7:9), u) * u)
+      do m = 1, 3
+         e1 = e(1, m)
+         e2 = e(2, m)
+         e3 = e(3, m)
+         lo(m) = huge(1.0_wp)
+         hi(m) = -huge(1.0_wp)
+         lo2 = huge(1.0_wp)
+         hi2 = -huge(1.0_wp)
+         if (second) then
+            do q = 1, npt
+               f = e1 * w(q, 1) + e2 * w(q, 2) + e3 * w(q, 3)
+               g1 = e1 * w(q, 4) + e2 * w(q, 5) + e3 * w(q, 6)
+               g2 = e1 * w(q, 7) + e2 * w(q, 8) + e3 * w(q, 9)
+               g = sqrt(g1 * g1 + g2 * g2) * d
+               a11 = e1 * w(q, 10) + e2 * w(q, 11) + e3 * w(q, 12)
+               a12 = e1 * w(q, 13) + e2 * w(q, 14) + e3 * w(q, 15)
+               a22 = e1 * w(q, 16) + e2 * w(q, 17) + e3 * w(q, 18)
+               am = 0.5_wp * (a11 + a22)
+               ar = sqrt(0.25_wp * (a11 - a22)**2 + a12 * a12)
+               lo(m) = min(lo(m), f - g)
+               hi(m) = max(hi(m), f + g)
+               lo2 = min(lo2, f - g + 0.5_wp * min(0.0_wp, am - ar) * d**2)
+               hi2 = max(hi2, f + g + 0.5_wp * max(0.0_wp, am + ar) * d**2)
+            end do
+         else
+            do q = 1, npt
+               f = e1 * w(q, 1) + e2 * w(q, 2) + e3 * w(q, 3)
+               g1 = e1 * w(q, 4) + e2 * w(q, 5) + e3 * w(q, 6)
+               g2 = e1 * w(q, 7) + e2 * w(q, 8) + e3 * w(q, 9)
+               g = sqrt(g1 * g1 + g2 * g2) * d
+               lo(m) = min(lo(m), f - g)
+               hi(m) = max(hi(m), f + g)
+            end do
+         end if
+         lo(m) = lo(m) - 0.5_wp * hf * d**2
+         hi(m) = hi(m) + 0.5_wp * hf * d**2
+         if (second) then
+            lo(m) = max(lo(m), lo2 - tf * d**3 / 6.0_wp)
+            hi(m) = min(hi(m), hi2 + tf * d**3 / 6.0_wp)
+         end if
+      end do
+      q2 = 0.5_wp * (lo + hi)
+      c = e(:, 1) * q2(1) + e(:, 2) * q2(2) + e(:, 3) * q2(3)
+      h = 0.5_wp * (hi - lo) + margin
+   end subroutine leaf_box
+
+   !> The vectors of `leaf_box` on the grid rows of one band (rows 0..kb, columns 0..npg): for
+   !> each point (flattened row-fastest per column) x = r u, X_1, X_2, Y_11, Y_12, Y_22.
+   pure subroutine band_vectors(i0, trig, rg, rt, rp, h11, h12, h22, v)
+      integer, intent(in) :: i0
+      real(wp), intent(in) :: trig(:, 0:), rg(0:, 0:), rt(0:, 0:), rp(0:, 0:), h11(0:, 0:), h12(0:, 0:), h22(0:, 0:)
+      real(wp), intent(out) :: v(0:, 0:, :)
+      integer :: a, j
+      real(wp) :: st, ct, sp, cp, u(3), et(3), ep(3), r
+      do j = 0, size(rg, 2) - 1
+         do a = 0, size(rg, 1) - 1
+            st = trig(1, i0 + a)
+            ct = trig(2, i0 + a)
+            sp = trig(3, j)
+            cp = trig(4, j)
+            u = [st * cp, st * sp, ct]
+            et = [ct * cp, ct * sp, -st]
+            ep = [-sp, cp, 0.0_wp]
+            r = rg(a, j)
+            v(a, j, 1:3) = r * u
+            v(a, j, 4:6) = rt(a, j) * u + r * et
+            v(a, j, 7:9) = rp(a, j) * u + r * ep
+            v(a, j, 10:12) = (h11(a, j) - r) * u + 2.0_wp * rt(a, j) * et
+            v(a, j, 13:15) = h12(a, j) * u + rt(a, j) * ep + rp(a, j) * et
+            v(a, j, 16:18) = (h22(a, j) - r) * u + 2.0_wp * rp(a, j) * ep
+         end do
+      end do
+   end subroutine band_vectors
+
+   !> Box of patch (l, i, j) (l < leaf_level) bounding its four children's boxes along its own
+   !> axes: the mean of the children's normals and two tangents.
+   pure subroutine parent_box(body, l, i, j, obb_c, obb_e, obb_h, margin)
+      type(contact_body_type), intent(in) :: body
+      integer, intent(in) :: l, i, j
+      real(wp), intent(in) :: margin
+      real(wp), intent(inout) :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
+      real(wp) :: e(3, 3), lo(3), hi(3), pc, pr, ph, th, n3(3)
+      integer :: k, kch, di, dj, m
+      k = patch_index(body, l, i, j)
+      ! normal: mean of the children's normals (any unit vector gives a valid box)
+      n3 = 0.0_wp
+      do dj = 0, 1
+         do di = 0, 1
+            kch = patch_index(body, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj)
+            n3 = n3 + obb_e(:, 3, kch)
+         end do
+      end do
+      ph = two_pi * (j - 0.5_wp) / patch_cols(l)
+      th = pi * (i - 0.5_wp) / patch_rows(l)
+      e = frame(n3, [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)], [cos(th) * cos(ph), cos(th) * sin(ph), -sin(th)], &
+                [-sin(ph), cos(ph), 0.0_wp])
+      lo = huge(1.0_wp)
+      hi = -huge(1.0_wp)
+      do dj = 0, 1
+         do di = 0, 1
+            kch = patch_index(body, l + 1, 2 * i - 1 + di, 2 * j - 1 + dj)
+            do m = 1, 3
+               pc = dot_product(e(:, m), obb_c(:, kch))
+               pr = sum(obb_h(:, kch) * abs(matmul(e(:, m), obb_e(:, :, kch))))
+               lo(m) = min(lo(m), pc - pr)
+               hi(m) = max(hi(m), pc + pr)
+            end do
+         end do
+      end do
+      obb_c(:, k) = matmul(e, 0.5_wp * (lo + hi))
+      obb_e(:, :, k) = e
+      obb_h(:, k) = 0.5_wp * (hi - lo) + margin
+   end subroutine parent_box
+
+   !> Orthonormal frame (columns) whose third axis is n normalised (the radial direction u when
+   !> n is degenerate) and whose first axis is e_phi (else e_theta) made orthogonal to it; any
+   !> orthonormal frame gives valid boxes.
+   pure function frame(n, u, et, ep) result(e)
+      real(wp), intent(in) :: n(3), u(3), et(3), ep(3)
+      real(wp) :: e(3, 3)
+      if (norm2(n) > 1.0e-6_wp * (1.0_wp + maxval(abs(n)))) then
+         e(:, 3) = n / norm2(n)
+      else
+         e(:, 3) = u
+      end if
+      e(:, 1) = ep - dot_product(ep, e(:, 3)) * e(:, 3)
+      if (norm2(e(:, 1)) < 0.1_wp) e(:, 1) = et - dot_product(et, e(:, 3)) * e(:, 3)
+      e(:, 1) = e(:, 1) / norm2(e(:, 1))
+      e(:, 2) = cross(e(:, 3), e(:, 1))
+   end function frame
+
+   !> Cross product.
+   pure function cross(a, b) result(c)
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: c(3)
+      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+   end function cross
+
+   !> r and its angular derivatives on the grid rows i0..i1 of the regular grid
+   !> theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np (j = 0..np, column np repeating column 0; np
+   !> even): per ring the sums over degree, then the sums over order for all azimuths at once
+   !> (vectorised over j), even and odd orders apart so that phi_j + pi follows from phi_j
+   !> (cos m(phi + pi) = (-1)^m cos m phi). Outputs (each optional, rows i0..i1 in the first
+   !> dimension) r, the gradient in the orthonormal frame (e_theta, e_phi), rt = dr/dtheta,
+   !> rp = (dr/dphi)/sin theta, and the covariant Hessian in that frame, h11 = r_theta,theta,
+   !> h12 = (r_theta,phi - cot(theta) r_phi)/sin theta, h22 = r_phi,phi/sin^2 theta
+   !> + cot(theta) r_theta (zero on the pole rows); the Legendre equation gives
+   !> h11 + h22 = -sum n(n+1) a_nm Y_nm. The derivatives come all together.
+   pure subroutine synthesize_rows(shape, np, nt, i0, i1, r, rt, rp, h11, h12, h22)
       type(sh_expansion_type), intent(in) :: shape
-      integer, intent(in) :: nt, np
-      real(wp), intent(out) :: r(0:nt, 0:np), g(0:nt, 0:np)
-      real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :)
-      real(wp), allocatable :: ca(:), cb(:), da(:), db(:), ea(:), eb(:)
+      integer, intent(in) :: np, nt, i0, i1
+      real(wp), intent(out), optional :: r(i0:, 0:), rt(i0:, 0:), rp(i0:, 0:), h11(i0:, 0:), h12(i0:, 0:), &
+                                         h22(i0:, 0:)
+      real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :), cc(:, :), sc(:, :), acc(:, :, :), ctab(:), &
+                               stab(:)
       integer, allocatable :: idx_out(:)
-      integer :: nmax, i, j, m, n, k
-      real(wp) :: th, vr, vt, vp
+      integer :: nmax, i, j, m, n, k, nh, q, par, nq, jj
+      real(wp) :: th, st, ct, pv, a, b, v(6)
+      logical :: derivs
 
       nmax = shape%nmax
+      nh = np / 2
+      derivs = present(rt)
+      nq = merge(6, 1, derivs)
       allocate (p(packed_size(nmax + 1)), dp(packed_size(nmax)), mps(packed_size(nmax)), idx_out(0:nmax))
-      allocate (cs(0:nmax, 0:np), sn(0:nmax, 0:np), ca(0:nmax), cb(0:nmax), da(0:nmax), db(0:nmax), &
-                ea(0:nmax), eb(0:nmax))
+      allocate (cs(0:nh, 0:nmax), sn(0:nh, 0:nmax), cc(nq, 0:nmax), sc(nq, 0:nmax), acc(0:nh, nq, 0:1), &
+                ctab(0:np - 1), stab(0:np - 1))
       k = 1
       do m = 0, nmax
          idx_out(m) = k
          k = k + nmax - m + 1
       end do
-      do j = 0, np
-         do m = 0, nmax
-            cs(m, j) = cos(m * two_pi * mod(j, np) / np)
-            sn(m, j) = sin(m * two_pi * mod(j, np) / np)
+      do j = 0, np - 1
+         ctab(j) = cos(two_pi * j / np)
+         stab(j) = sin(two_pi * j / np)
+      end do
+      do m = 0, nmax
+         do j = 0, nh
+            cs(j, m) = ctab(mod(m * j, np))
+            sn(j, m) = stab(mod(m * j, np))
          end do
       end do
-      do i = 0, nt
+      v = 0.0_wp
+      do i = i0, i1
          th = pi * i / nt
-         call legendre_values(shape%table, cos(th), p, sin(th))
-         call legendre_theta_derivatives(shape%table, p, nmax, idx_out, dp, mps)
+         st = sin(th)
+         ct = cos(th)
+         call legendre_values(shape%table, ct, p, st)
+         if (derivs) call legendre_theta_derivatives(shape%table, p, nmax, idx_out, dp, mps)
+         ! per order m, cos and sin coefficients of: r; r_theta; r_phi/sin; sum n(n+1) a Y;
+         ! sum m (m A_m / sin)(cos, sin); r_theta,phi
          do m = 0, nmax
-            ca(m) = 0.0_wp
-            cb(m) = 0.0_wp
-            da(m) = 0.0_wp
-            db(m) = 0.0_wp
-            ea(m) = 0.0_wp
-            eb(m) = 0.0_wp
+            cc(:, m) = 0.0_wp
+            sc(:, m) = 0.0_wp
             do n = m, nmax
-               ca(m) = ca(m) + shape%a(n, m) * p(shape%table%idx(m) + n - m)
-               cb(m) = cb(m) + shape%b(n, m) * p(shape%table%idx(m) + n - m)
-               da(m) = da(m) + shape%a(n, m) * dp(idx_out(m) + n - m)
-               db(m) = db(m) + shape%b(n, m) * dp(idx_out(m) + n - m)
-               ea(m) = ea(m) + shape%a(n, m) * mps(idx_out(m) + n - m)
-               eb(m) = eb(m) + shape%b(n, m) * mps(idx_out(m) + n - m)
+               pv = p(shape%table%idx(m) + n - m)
+               a = shape%a(n, m)
+               b = shape%b(n, m)
+               cc(1, m) = cc(1, m) + a * pv
+               sc(1, m) = sc(1, m) + b * pv
+               if (.not. derivs) cycle
+               cc(4, m) = cc(4, m) + a * (n * (n + 1) * pv)
+               sc(4, m) = sc(4, m) + b * (n * (n + 1) * pv)
+               pv = dp(idx_out(m) + n - m)
+               cc(2, m) = cc(2, m) + a * pv
+               sc(2, m) = sc(2, m) + b * pv
+               pv = mps(idx_out(m) + n - m)
+               cc(3, m) = cc(3, m) + b * pv
+               sc(3, m) = sc(3, m) - a * pv
+            end do
+            if (derivs) then
+               cc(5, m) = -m * sc(3, m)
+               sc(5, m) = m * cc(3, m)
+               cc(6, m) = m * sc(2, m)
+               sc(6, m) = -m * cc(2, m)
+            end if
+         end do
+         do m = 0, nmax
+            par = mod(m, 2)
+            do q = 1, nq
+               if (m <= 1) then
+                  acc(:, q, par) = cc(q, m) * cs(:, m) + sc(q, m) * sn(:, m)
+               else
+                  acc(:, q, par) = acc(:, q, par) + cc(q, m) * cs(:, m) + sc(q, m) * sn(:, m)
+               end if
             end do
          end do
+         if (nmax == 0) acc(:, :, 1) = 0.0_wp
          do j = 0, np
-            vr = 0.0_wp
-            vt = 0.0_wp
-            vp = 0.0_wp
-            do m = 0, nmax
-               vr = vr + ca(m) * cs(m, j) + cb(m) * sn(m, j)
-               vt = vt + da(m) * cs(m, j) + db(m) * sn(m, j)
-               vp = vp + eb(m) * cs(m, j) - ea(m) * sn(m, j)
-            end do
-            r(i, j) = vr
-            g(i, j) = sqrt(vt**2 + vp**2)
+            jj = mod(j, np)
+            if (jj <= nh) then
+               v(1:nq) = acc(jj, :, 0) + acc(jj, :, 1)
+            else
+               v(1:nq) = acc(jj - nh, :, 0) - acc(jj - nh, :, 1)
+            end if
+            if (present(r)) r(i, j) = v(1)
+            if (.not. derivs) cycle
+            rt(i, j) = v(2)
+            rp(i, j) = v(3)
+            if (i == 0 .or. i == nt) then
+               h11(i, j) = 0.0_wp
+               h12(i, j) = 0.0_wp
+               h22(i, j) = 0.0_wp
+            else
+               ! v(5) = sum m^2 A_m / sin (cos, sin), so r_phi,phi / sin^2 = -v(5) / sin; v(6) = r_theta,phi
+               h22(i, j) = (-v(5) + ct * v(2)) / st
+               h11(i, j) = -v(4) - h22(i, j)
+               h12(i, j) = (v(6) - ct * v(3)) / st
+            end if
          end do
       end do
-   end subroutine synthesize_regular
+   end subroutine synthesize_rows
 end module anm_contact_body

@@ -38,12 +38,13 @@
 module anm_contact_overlap
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, node_size, nd_dir, nd_cosa, &
+      & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
    implicit none
    private
 
    public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
-      & point_inside, sector_range
+      & point_inside, sector_range, boxes_disjoint
 
    !> Contact methods.
    type :: contact_method_enum
@@ -93,7 +94,45 @@ module anm_contact_overlap
       real(wp) :: sb = 1.0_wp
    end type pose_type
 
+   !> Fixed data of a box traversal: A-to-B rotation, world scales of the body frames, the box.
+   type :: traversal_type
+      real(wp) :: rot(3, 3) = 0.0_wp
+      real(wp) :: sa = 1.0_wp, sb = 1.0_wp
+      real(wp) :: lo(3) = 0.0_wp, hi(3) = 0.0_wp
+   end type traversal_type
+
+   !> What the box traversal needs to test A's leaf patches against B (`probe_patch`).
+   type :: probe_type
+      type(contact_params_type) :: params
+      real(wp) :: eob_lo(3) = 0.0_wp, eob_hi(3) = 0.0_wp, cbox_lo(3) = 0.0_wp, cbox_hi(3) = 0.0_wp
+      !> Certified mode: radial gap tolerance in B units and in A units.
+      real(wp) :: tol = 0.0_wp, tol_a = 0.0_wp
+      integer :: stop_level = stored_level
+   end type probe_type
+
+   !> A's patch in a box traversal: level, row, column, storage index; its box (centre, axes,
+   !> half-extents, containing-ball radius) in B's frame; the cone from B's centre holding the
+   !> ball (`cone` false when the ball holds B's centre).
+   type :: a_node_type
+      integer :: l, i, j, k
+      real(wp) :: c(3), e(3, 3), h(3), r
+      real(wp) :: u(3), sinb, cosb
+      logical :: cone
+   end type a_node_type
+
+   !> B's patch in a box traversal: level, row, column, storage index; the cone from A's centre
+   !> (A's frame) holding its box's ball.
+   type :: b_node_type
+      integer :: l, i, j, k
+      real(wp) :: u(3), sinb, cosb
+      logical :: cone
+   end type b_node_type
+
    integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
+   !> Largest number of probed leaf patches of A remembered by the box traversal.
+   integer, parameter :: max_leaves = 256
+   !> Outcome of the box traversal: no contact (certain), contact found, undecided.
+   integer, parameter :: sep_disjoint = 0, sep_found = 1, sep_unsure = 2
    !> Finest patch level of the wall test (pi/1024 rad; levels beyond stored_level use local bounds).
    integer, parameter :: wall_level = stored_level + 2
 
@@ -123,6 +162,8 @@ contains
       real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
       type(pose_type) :: pab, pba
       logical :: found, certain
+      type(probe_type) :: pr
+      integer :: status
 
       dvec = center_b - center_a
       dist = sqrt(sum(dvec**2))
@@ -162,6 +203,24 @@ contains
       tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
                              scale_b * maxval(body_b%box_hi - body_b%box_lo))
       hit = .true.
+      ! stage 4a: the surfaces' box hierarchies traversed together inside the certified EOB; each
+      ! leaf patch of A left in an unseparated pair is tested against B at once
+      pr%params = params
+      pr%eob_lo = eob_lo
+      pr%eob_hi = eob_hi
+      pr%cbox_lo = cbox_lo
+      pr%cbox_hi = cbox_hi
+      pr%tol = tol / scale_b
+      pr%tol_a = tol / scale_a
+      pr%stop_level = stop_level(params)
+      call separate_surfaces(body_a, body_b, pab, pba, pr, status)
+      if (status == sep_found) return
+      if (status == sep_disjoint) then
+         hit = .false.
+         return
+      end if
+      ! stage 4b: surface of A against B, then (unless A's surface was proven outside B) surface
+      ! of B against A
       call probe_surface(body_a, body_b, pab, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol / scale_b, found, &
                          certain)
       if (found) return
@@ -603,23 +662,457 @@ contains
       !> Certified mode: radial gap tolerance in B units.
       real(wp), intent(in) :: tol
       logical, intent(out) :: found, certain
-      integer :: i, j, stop_level
-      stop_level = stored_level
-      if (params%certified) then
-         do while (pi / patch_rows(stop_level) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. stop_level < 24)
-            stop_level = stop_level + 1
-         end do
-      end if
+      integer :: i, j, ls
+      ls = stop_level(params)
       found = .false.
       certain = .true.
       do j = 1, patch_cols(0)
          do i = 1, patch_rows(0)
-            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, 0, i, j, a%r_min, &
+            call probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, ls, 0, i, j, a%r_min, &
                              a%r_max, found, certain)
             if (found) return
          end do
       end do
    end subroutine probe_surface
+
+   !> Finest level of `probe_patch`: stored_level (then N_box scan), in certified mode the level
+   !> whose patches are within `resolution`.
+   pure integer function stop_level(params) result(ls)
+      type(contact_params_type), intent(in) :: params
+      ls = stored_level
+      if (params%certified) then
+         do while (pi / patch_rows(ls) > params%resolution * (1.0_wp + 1.0e-12_wp) .and. ls < 24)
+            ls = ls + 1
+         end do
+      end if
+   end function stop_level
+
+   !> Traverse the surface box hierarchies of A and B together (`body%obb_*`, certified). A pair
+   !> of patches cannot hold a common surface point when the cone of B's patch directions misses
+   !> the cone from B's centre that holds A's box (or vice versa), when their boxes are disjoint
+   !> (containing balls, then the separating axis test), or when one of them lies outside the box
+   !> [lo, hi] (the certified EOB: every common point of the bodies lies in it) or outside the
+   !> other body's certified box. A's tree is descended depth first; each A patch carries the list
+   !> of B patches its parent could not separate, B patches larger than it being replaced by their
+   !> children. When a leaf patch of A is left with leaf patches of B, witnesses of contact are
+   !> tested at once: the N_box scan points (in the EOB) of these leaf patches in default mode,
+   !> their centre surface points (within the gap tolerance) in certified mode. After the
+   !> traversal, if no witness was found, each such leaf patch of A is tested against B with
+   !> `probe_patch`. `status`: sep_found when contact was found; sep_disjoint when every such leaf
+   !> patch was found outside B by certified tests (then the surfaces do not meet); otherwise
+   !> sep_unsure.
+   pure subroutine separate_surfaces(a, b, pab, pba, pr, status)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: pab, pba
+      type(probe_type), intent(in) :: pr
+      integer, intent(out) :: status
+      integer :: nleaf, leaves(3, max_leaves), nbseen, bseen(max_leaves), n
+      logical :: found, certain, live
+      type(traversal_type) :: tr
+      type(a_node_type) :: na
+      type(b_node_type) :: list(patch_rows(0) * patch_cols(0))
+      type(b_node_type) :: nb
+      real(wp) :: bc(3), be(3, 3), bh(3), br
+      integer :: ia, ja, ib, jb, nlist
+      tr%rot = pab%m / pab%k
+      tr%sa = sqrt(sum(pab%rw(:, 1)**2))
+      tr%sb = sqrt(sum(pba%rw(:, 1)**2))
+      tr%lo = pr%cbox_lo
+      tr%hi = pr%cbox_hi
+      status = sep_disjoint
+      nleaf = 0
+      nbseen = 0
+      ! B's level-0 patches that meet the EOB and A's certified box (an oriented box in B's frame)
+      bc = matmul(pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + pab%t
+      be = tr%rot
+      bh = pab%k * 0.5_wp * (a%box_hi - a%box_lo)
+      br = norm2(bh) * (1.0_wp + 1.0e-12_wp)
+      nlist = 0
+      do jb = 1, patch_cols(0)
+         do ib = 1, patch_rows(0)
+            call make_b_node(b%node, b%off, pba, tr, 0, ib, jb, nb, live)
+            if (.not. live) cycle
+            if (boxes_disjoint(b%node(nd_c:nd_c + 2, nb%k), b%node(nd_e:nd_e + 8, nb%k), b%node(nd_h:nd_h + 2, nb%k), &
+                               b%node(nd_r, nb%k), bc, be, bh, br)) cycle
+            nlist = nlist + 1
+            list(nlist) = nb
+         end do
+      end do
+      if (nlist == 0) return
+      bc = 0.5_wp * (b%box_lo + b%box_hi)
+      be = reshape([1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp], [3, 3])
+      bh = 0.5_wp * (b%box_hi - b%box_lo)
+      br = norm2(bh) * (1.0_wp + 1.0e-12_wp)
+      do ja = 1, patch_cols(0)
+         do ia = 1, patch_rows(0)
+            call make_a_node(a%node, a%off, pab, tr, 0, ia, ja, na, live)
+            if (.not. live) cycle
+            if (boxes_disjoint(na%c, na%e, na%h, na%r, bc, be, bh, br)) cycle
+            call a_descend(a, b, pab, pba, tr, pr, na, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
+            if (status == sep_found) return
+         end do
+      end do
+      if (status /= sep_disjoint) return
+      ! no witness of contact: prove each leaf of A outside B (or find contact)
+      do n = 1, nleaf
+         found = .false.
+         certain = .true.
+         call probe_patch(a, b, pab, pr%eob_lo, pr%eob_hi, pr%cbox_lo, pr%cbox_hi, pr%params, pr%tol, &
+                          pr%stop_level, leaf_level, leaves(2, n), leaves(3, n), a%r_min, a%r_max, found, certain)
+         if (found) then
+            status = sep_found
+            return
+         end if
+         if (.not. certain) status = sep_unsure
+      end do
+   end subroutine separate_surfaces
+
+   !> A's patch `na` against the B patches `parent` that its parent could not separate (see
+   !> `separate_surfaces`).
+   pure recursive subroutine a_descend(a, b, pab, pba, tr, pr, na, parent, status, nleaf, leaves, nbseen, bseen)
+      type(contact_body_type), intent(in) :: a, b
+      type(pose_type), intent(in) :: pab, pba
+      type(traversal_type), intent(in) :: tr
+      type(probe_type), intent(in) :: pr
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: parent(:)
+      !> Traversal status; A's leaf patches met (storage index, row, column); B's leaf patches
+      !> whose witness was tested (storage index).
+      integer, intent(inout) :: status, nleaf, leaves(:, :), nbseen, bseen(:)
+      integer, parameter :: max_list = 96
+      type(b_node_type) :: list(max_list), work(max_list)
+      type(a_node_type) :: nc
+      integer :: n, nlist, nwork, di, dj, pass
+      logical :: more, ok, found, live
+      real(wp) :: th0, th1, ph0, ph1
+      ! B patches not separated from A's patch; those larger than it are replaced by their children
+      nlist = 0
+      ok = .true.
+      do n = 1, size(parent)
+         if (patches_apart(a%node, b%node, na, parent(n))) cycle
+         if (parent(n)%l < leaf_level .and. b%node(nd_r, parent(n)%k) > na%r) then
+            call split_b(a%node, b%node, b%off, pba, tr, na, parent(n), list, nlist, ok)
+         else if (nlist < max_list) then
+            nlist = nlist + 1
+            list(nlist) = parent(n)
+         else
+            ok = .false.
+         end if
+         if (.not. ok) then
+            status = sep_unsure
+            return
+         end if
+      end do
+      if (nlist == 0) return
+      if (na%l < leaf_level) then
+         do dj = 0, 1
+            do di = 0, 1
+               call make_a_node(a%node, a%off, pab, tr, na%l + 1, 2 * na%i - 1 + di, 2 * na%j - 1 + dj, nc, live)
+               if (.not. live) cycle
+               call a_descend(a, b, pab, pba, tr, pr, nc, list(1:nlist), status, nleaf, leaves, nbseen, bseen)
+               if (status == sep_found) return
+            end do
+         end do
+         return
+      end if
+      ! leaf of A: refine B down to its leaves
+      do pass = 1, leaf_level + 1
+         more = .false.
+         nwork = 0
+         do n = 1, nlist
+            if (list(n)%l < leaf_level) then
+               more = .true.
+               call split_b(a%node, b%node, b%off, pba, tr, na, list(n), work, nwork, ok)
+               if (.not. ok) then
+                  status = sep_unsure
+                  return
+               end if
+            else
+               nwork = nwork + 1
+               work(nwork) = list(n)
+            end if
+         end do
+         nlist = nwork
+         list(1:nlist) = work(1:nwork)
+         if (nlist == 0) return
+         if (.not. more) exit
+      end do
+      ! A's leaf patch may meet B's surface: remember it (once)
+      do n = 1, nleaf
+         if (leaves(1, n) == na%k) return
+      end do
+      if (nleaf >= size(leaves, 2)) then
+         status = sep_unsure
+         return
+      end if
+      nleaf = nleaf + 1
+      leaves(:, nleaf) = [na%k, na%i, na%j]
+      if (pr%params%certified) then
+         ! witnesses of contact first (the proofs wait until every leaf is known): the centre
+         ! surface points of A's leaf and of the B leaves, tested along the ray from the other
+         ! centre
+         if (radial_gap(b, pab, a%node(nd_rc, na%k) * a%node(nd_dir:nd_dir + 2, na%k)) <= pr%tol) then
+            status = sep_found
+            return
+         end if
+         do n = 1, nlist
+            if (any(bseen(1:min(nbseen, size(bseen))) == list(n)%k)) cycle
+            nbseen = nbseen + 1
+            if (nbseen <= size(bseen)) bseen(nbseen) = list(n)%k
+            if (radial_gap(a, pba, b%node(nd_rc, list(n)%k) * b%node(nd_dir:nd_dir + 2, list(n)%k)) <= pr%tol_a) then
+               status = sep_found
+               return
+            end if
+         end do
+      else
+         ! default mode: the N_box scan points of A's leaf and of the B leaves
+         call patch_rect(leaf_level, na%i, na%j, th0, th1, ph0, ph1)
+         found = .false.
+         call scan_rect(a, b, pab, pr%eob_lo, pr%eob_hi, pr%params%nbox, th0, th1, ph0, ph1, found)
+         if (found) then
+            status = sep_found
+            return
+         end if
+         do n = 1, nlist
+            if (any(bseen(1:min(nbseen, size(bseen))) == list(n)%k)) cycle
+            nbseen = nbseen + 1
+            if (nbseen <= size(bseen)) bseen(nbseen) = list(n)%k
+            call patch_rect(leaf_level, list(n)%i, list(n)%j, th0, th1, ph0, ph1)
+            call scan_rect(b, a, pba, pr%eob_lo, pr%eob_hi, pr%params%nbox, th0, th1, ph0, ph1, found)
+            if (found) then
+               status = sep_found
+               return
+            end if
+         end do
+      end if
+   end subroutine a_descend
+
+   !> Append the children of B's patch y that are not separated from A's patch na to out(1:nout)
+   !> (`ok` false when out is full). pa, pb: the bodies' `node` arrays; offb: B's level offsets.
+   pure subroutine split_b(pa, pb, offb, pba, tr, na, y, out, nout, ok)
+      real(wp), intent(in) :: pa(node_size, *), pb(node_size, *)
+      integer, intent(in) :: offb(0:)
+      type(pose_type), intent(in) :: pba
+      type(traversal_type), intent(in) :: tr
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: y
+      type(b_node_type), intent(inout) :: out(:)
+      integer, intent(inout) :: nout
+      logical, intent(inout) :: ok
+      type(b_node_type) :: yc
+      integer :: ei, ej, k, l, i, j
+      real(wp) :: dx, dy, dz
+      logical :: live
+      l = y%l + 1
+      do ej = 0, 1
+         do ei = 0, 1
+            i = 2 * y%i - 1 + ei
+            j = 2 * y%j - 1 + ej
+            k = offb(l) + (j - 1) * ishft(4, l) + i
+            ! cheap tests on stored data first: cone of A's box against the patch cap, balls
+            if (na%cone) then
+               if (cones_apart(na%u, na%sinb, na%cosb, pb(nd_dir:nd_dir + 2, k), pb(nd_cosa, k), pb(nd_sina, k))) cycle
+            end if
+            dx = pb(nd_c, k) - na%c(1)
+            dy = pb(nd_c + 1, k) - na%c(2)
+            dz = pb(nd_c + 2, k) - na%c(3)
+            if (dx * dx + dy * dy + dz * dz > (na%r + pb(nd_r, k))**2 * (1.0_wp + 1.0e-11_wp)) cycle
+            call make_b_node(pb, offb, pba, tr, l, i, j, yc, live)
+            if (.not. live) cycle
+            if (yc%cone) then
+               if (cones_apart(yc%u, yc%sinb, yc%cosb, pa(nd_dir:nd_dir + 2, na%k), pa(nd_cosa, na%k), &
+                               pa(nd_sina, na%k))) cycle
+            end if
+            if (boxes_disjoint(na%c, na%e, na%h, na%r, pb(nd_c:nd_c + 2, k), pb(nd_e:nd_e + 8, k), pb(nd_h:nd_h + 2, k), &
+                               pb(nd_r, k))) cycle
+            if (nout >= size(out)) then
+               ok = .false.
+               return
+            end if
+            nout = nout + 1
+            out(nout) = yc
+         end do
+      end do
+   end subroutine split_b
+
+   !> A's patch (l, i, j): its box in B's frame and its cone from B's centre; `live` false when
+   !> its sector ball misses the EOB. pa: A's `node` array; offa: its level offsets.
+   pure subroutine make_a_node(pa, offa, pab, tr, l, i, j, nd, live)
+      real(wp), intent(in) :: pa(node_size, *)
+      integer, intent(in) :: offa(0:)
+      type(pose_type), intent(in) :: pab
+      type(traversal_type), intent(in) :: tr
+      integer, intent(in) :: l, i, j
+      type(a_node_type), intent(out) :: nd
+      logical, intent(out) :: live
+      integer :: k, m
+      real(wp) :: x1, x2, x3
+      k = offa(l) + (j - 1) * ishft(4, l) + i
+      nd%l = l
+      nd%i = i
+      nd%j = j
+      nd%k = k
+      x1 = pa(nd_ball, k)
+      x2 = pa(nd_ball + 1, k)
+      x3 = pa(nd_ball + 2, k)
+      live = ball_in_box(pab%cw + pab%rw(:, 1) * x1 + pab%rw(:, 2) * x2 + pab%rw(:, 3) * x3, pa(nd_brad, k) * tr%sa, &
+                         tr%lo, tr%hi)
+      if (.not. live) return
+      x1 = pa(nd_c, k)
+      x2 = pa(nd_c + 1, k)
+      x3 = pa(nd_c + 2, k)
+      nd%c = pab%m(:, 1) * x1 + pab%m(:, 2) * x2 + pab%m(:, 3) * x3 + pab%t
+      do m = 0, 2
+         x1 = pa(nd_e + 3 * m, k)
+         x2 = pa(nd_e + 3 * m + 1, k)
+         x3 = pa(nd_e + 3 * m + 2, k)
+         nd%e(:, m + 1) = tr%rot(:, 1) * x1 + tr%rot(:, 2) * x2 + tr%rot(:, 3) * x3
+      end do
+      nd%h = pab%k * pa(nd_h:nd_h + 2, k)
+      nd%r = pab%k * pa(nd_r, k) * (1.0_wp + 1.0e-12_wp)
+      call ball_cone(nd%c, nd%r, nd%u, nd%sinb, nd%cosb, nd%cone)
+   end subroutine make_a_node
+
+   !> B's patch (l, i, j): its cone from A's centre (A's frame); `live` false when its sector
+   !> ball misses the EOB. pb: B's `node` array; offb: its level offsets.
+   pure subroutine make_b_node(pb, offb, pba, tr, l, i, j, nd, live)
+      real(wp), intent(in) :: pb(node_size, *)
+      integer, intent(in) :: offb(0:)
+      type(pose_type), intent(in) :: pba
+      type(traversal_type), intent(in) :: tr
+      integer, intent(in) :: l, i, j
+      type(b_node_type), intent(out) :: nd
+      logical, intent(out) :: live
+      integer :: k
+      real(wp) :: c(3), x1, x2, x3
+      k = offb(l) + (j - 1) * ishft(4, l) + i
+      nd%l = l
+      nd%i = i
+      nd%j = j
+      nd%k = k
+      x1 = pb(nd_ball, k)
+      x2 = pb(nd_ball + 1, k)
+      x3 = pb(nd_ball + 2, k)
+      live = ball_in_box(pba%cw + pba%rw(:, 1) * x1 + pba%rw(:, 2) * x2 + pba%rw(:, 3) * x3, pb(nd_brad, k) * tr%sb, &
+                         tr%lo, tr%hi)
+      if (.not. live) return
+      x1 = pb(nd_c, k)
+      x2 = pb(nd_c + 1, k)
+      x3 = pb(nd_c + 2, k)
+      c = pba%m(:, 1) * x1 + pba%m(:, 2) * x2 + pba%m(:, 3) * x3 + pba%t
+      call ball_cone(c, pba%k * pb(nd_r, k) * (1.0_wp + 1.0e-12_wp), nd%u, nd%sinb, nd%cosb, nd%cone)
+   end subroutine make_b_node
+
+   !> Cone from the origin holding the ball (c, r): axis u, sin and cos of the half-angle
+   !> (`cone` false when the ball holds the origin).
+   pure subroutine ball_cone(c, r, u, sinb, cosb, cone)
+      real(wp), intent(in) :: c(3), r
+      real(wp), intent(out) :: u(3), sinb, cosb
+      logical, intent(out) :: cone
+      real(wp) :: d
+      d = sqrt(c(1)**2 + c(2)**2 + c(3)**2)
+      cone = d > r * (1.0_wp + 1.0e-12_wp)
+      if (.not. cone) then
+         u = 0.0_wp
+         sinb = 1.0_wp
+         cosb = 0.0_wp
+         return
+      end if
+      u = c / d
+      sinb = r / d
+      cosb = sqrt(max(0.0_wp, 1.0_wp - sinb**2))
+   end subroutine ball_cone
+
+   !> True when A's patch na and B's patch y are separated: cones, containing balls, boxes.
+   pure logical function patches_apart(pa, pb, na, y) result(apart)
+      real(wp), intent(in) :: pa(node_size, *), pb(node_size, *)
+      type(a_node_type), intent(in) :: na
+      type(b_node_type), intent(in) :: y
+      integer :: k
+      apart = .true.
+      k = y%k
+      if (na%cone) then
+         if (cones_apart(na%u, na%sinb, na%cosb, pb(nd_dir:nd_dir + 2, k), pb(nd_cosa, k), pb(nd_sina, k))) return
+      end if
+      if (y%cone) then
+         if (cones_apart(y%u, y%sinb, y%cosb, pa(nd_dir:nd_dir + 2, na%k), pa(nd_cosa, na%k), pa(nd_sina, na%k))) return
+      end if
+      apart = boxes_disjoint(na%c, na%e, na%h, na%r, pb(nd_c:nd_c + 2, k), pb(nd_e:nd_e + 8, k), pb(nd_h:nd_h + 2, k), &
+                             pb(nd_r, k))
+   end function patches_apart
+
+   !> True when the cone (u, sinb, cosb) (half-angle beta <= pi/2) misses the cap (dir, cosa,
+   !> sina) (half-angle alpha <= pi/2): the angle between the axes exceeds alpha + beta, i.e.
+   !> u . dir < cos(alpha + beta) (with a margin).
+   pure logical function cones_apart(u, sinb, cosb, dir, cosa, sina) result(apart)
+      real(wp), intent(in) :: u(3), sinb, cosb, dir(3), cosa, sina
+      apart = cosa >= 0.0_wp .and. &
+              u(1) * dir(1) + u(2) * dir(2) + u(3) * dir(3) < cosa * cosb - sina * sinb - 1.0e-12_wp
+   end function cones_apart
+
+   !> Separating axis test of two oriented boxes (centre, orthonormal axes as columns,
+   !> half-extents, radius of a containing ball): true when their balls are apart or one of the
+   !> 15 axes (6 face normals, 9 edge cross products) separates them, with a relative margin so
+   !> that "disjoint" holds despite rounding. The normals (the thin directions) come first.
+   pure logical function boxes_disjoint(c1, e1, h1, r1, c2, e2, h2, r2) result(sep)
+      real(wp), intent(in) :: c1(3), e1(3, 3), h1(3), r1, c2(3), e2(3, 3), h2(3), r2
+      real(wp), parameter :: eps = 1.0e-12_wp
+      real(wp) :: dx, dy, dz, dd, tol, t1, t2, t3, s1, s2, s3
+      real(wp) :: r11, r12, r13, r21, r22, r23, r31, r32, r33
+      real(wp) :: a11, a12, a13, a21, a22, a23, a31, a32, a33
+      sep = .true.
+      dx = c2(1) - c1(1)
+      dy = c2(2) - c1(2)
+      dz = c2(3) - c1(3)
+      dd = dx * dx + dy * dy + dz * dz
+      if (dd > (r1 + r2)**2 * (1.0_wp + 4.0_wp * eps)) return
+      tol = eps * (r1 + r2 + sqrt(dd))
+      ! normal of box 2: r_i3 = e1_i . e2_3
+      r13 = e1(1, 1) * e2(1, 3) + e1(2, 1) * e2(2, 3) + e1(3, 1) * e2(3, 3)
+      r23 = e1(1, 2) * e2(1, 3) + e1(2, 2) * e2(2, 3) + e1(3, 2) * e2(3, 3)
+      r33 = e1(1, 3) * e2(1, 3) + e1(2, 3) * e2(2, 3) + e1(3, 3) * e2(3, 3)
+      s3 = dx * e2(1, 3) + dy * e2(2, 3) + dz * e2(3, 3)
+      if (abs(s3) > h2(3) + h1(1) * abs(r13) + h1(2) * abs(r23) + h1(3) * abs(r33) + tol) return
+      ! normal of box 1
+      r31 = e1(1, 3) * e2(1, 1) + e1(2, 3) * e2(2, 1) + e1(3, 3) * e2(3, 1)
+      r32 = e1(1, 3) * e2(1, 2) + e1(2, 3) * e2(2, 2) + e1(3, 3) * e2(3, 2)
+      t3 = dx * e1(1, 3) + dy * e1(2, 3) + dz * e1(3, 3)
+      a31 = abs(r31) + eps
+      a32 = abs(r32) + eps
+      a33 = abs(r33) + eps
+      if (abs(t3) > h1(3) + h2(1) * a31 + h2(2) * a32 + h2(3) * a33 + tol) return
+      ! the other faces
+      r11 = e1(1, 1) * e2(1, 1) + e1(2, 1) * e2(2, 1) + e1(3, 1) * e2(3, 1)
+      r12 = e1(1, 1) * e2(1, 2) + e1(2, 1) * e2(2, 2) + e1(3, 1) * e2(3, 2)
+      r21 = e1(1, 2) * e2(1, 1) + e1(2, 2) * e2(2, 1) + e1(3, 2) * e2(3, 1)
+      r22 = e1(1, 2) * e2(1, 2) + e1(2, 2) * e2(2, 2) + e1(3, 2) * e2(3, 2)
+      a11 = abs(r11) + eps
+      a12 = abs(r12) + eps
+      a13 = abs(r13) + eps
+      a21 = abs(r21) + eps
+      a22 = abs(r22) + eps
+      a23 = abs(r23) + eps
+      t1 = dx * e1(1, 1) + dy * e1(2, 1) + dz * e1(3, 1)
+      t2 = dx * e1(1, 2) + dy * e1(2, 2) + dz * e1(3, 2)
+      if (abs(t1) > h1(1) + h2(1) * a11 + h2(2) * a12 + h2(3) * a13 + tol) return
+      if (abs(t2) > h1(2) + h2(1) * a21 + h2(2) * a22 + h2(3) * a23 + tol) return
+      s1 = t1 * r11 + t2 * r21 + t3 * r31
+      s2 = t1 * r12 + t2 * r22 + t3 * r32
+      if (abs(s1) > h2(1) + h1(1) * a11 + h1(2) * a21 + h1(3) * a31 + tol) return
+      if (abs(s2) > h2(2) + h1(1) * a12 + h1(2) * a22 + h1(3) * a32 + tol) return
+      ! edge-edge axes e1_i x e2_j: |t_i2 r_i1j - t_i1 r_i2j| > h1_i1 a_i2j + h1_i2 a_i1j
+      ! + h2_j1 a_ij2 + h2_j2 a_ij1, (i, i1, i2) and (j, j1, j2) cyclic
+      if (abs(t3 * r21 - t2 * r31) > h1(2) * a31 + h1(3) * a21 + h2(2) * a13 + h2(3) * a12 + tol) return
+      if (abs(t3 * r22 - t2 * r32) > h1(2) * a32 + h1(3) * a22 + h2(3) * a11 + h2(1) * a13 + tol) return
+      if (abs(t3 * r23 - t2 * r33) > h1(2) * a33 + h1(3) * a23 + h2(1) * a12 + h2(2) * a11 + tol) return
+      if (abs(t1 * r31 - t3 * r11) > h1(3) * a11 + h1(1) * a31 + h2(2) * a23 + h2(3) * a22 + tol) return
+      if (abs(t1 * r32 - t3 * r12) > h1(3) * a12 + h1(1) * a32 + h2(3) * a21 + h2(1) * a23 + tol) return
+      if (abs(t1 * r33 - t3 * r13) > h1(3) * a13 + h1(1) * a33 + h2(1) * a22 + h2(2) * a21 + tol) return
+      if (abs(t2 * r11 - t1 * r21) > h1(1) * a21 + h1(2) * a11 + h2(2) * a33 + h2(3) * a32 + tol) return
+      if (abs(t2 * r12 - t1 * r22) > h1(1) * a22 + h1(2) * a12 + h2(3) * a31 + h2(1) * a33 + tol) return
+      if (abs(t2 * r13 - t1 * r23) > h1(1) * a23 + h1(2) * a13 + h2(1) * a32 + h2(2) * a31 + tol) return
+      sep = .false.
+   end function boxes_disjoint
 
    pure recursive subroutine probe_patch(a, b, ps, eob_lo, eob_hi, cbox_lo, cbox_hi, params, tol, stop_level, l, &
                                          i, j, plo, phi, found, certain)

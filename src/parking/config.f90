@@ -5,8 +5,8 @@
 !>     &box      length, periodic
 !>     &sieves   nsieve, min_width, max_width, fraction, fraction_mode, total_fraction, source, order
 !>     &synthetic count, nmax, bc_mean, bc_sd, ab_mean, ab_sd, rough_c, rough_beta, sigma_rough
-!>     &parking  max_locations, max_orientations, max_sizes, max_shapes, contact_method, n_ext, n_box,
-!>               certified
+!>     &parking  max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method,
+!>               n_ext, n_box, certified, placement
 !>     &shells   nlayer, thickness, thickness_unit, mode, colour
 !>     &output   directory, name, vrml, vrml_per_layer, tessellation
 !>     &run      seed
@@ -62,6 +62,9 @@ module anm_parking_config
       integer :: synthetic_count = 24
       !> Parking: the thesis' four randomness sources.
       integer :: max_locations = 2000, max_orientations = 1, max_sizes = 1, max_shapes = 1
+      !> Particles of a sieve that may exhaust all their attempts before the sieve ends (1: the
+      !> thesis, the sieve ends at the first particle that cannot be parked).
+      integer :: max_failures = 1
       !> Contact method name ("eob" or "newton_raphson"), N_ext, N_box and certified mode.
       character(len=32) :: contact_method = "eob"
       !> N_ext and N_box.
@@ -112,7 +115,7 @@ contains
       character(len=512) :: source(max_sieves)
       integer :: count, nmax
       real(wp) :: bc_mean, bc_sd, ab_mean, ab_sd, rough_c, rough_beta, sigma_rough
-      integer :: max_locations, max_orientations, max_sizes, max_shapes, n_ext, n_box
+      integer :: max_locations, max_orientations, max_sizes, max_shapes, max_failures, n_ext, n_box
       character(len=32) :: contact_method, mode
       character(len=16) :: placement
       logical :: certified
@@ -127,8 +130,8 @@ contains
       namelist /box/ length, periodic
       namelist /sieves/ nsieve, min_width, max_width, fraction, fraction_mode, total_fraction, source, order
       namelist /synthetic/ count, nmax, bc_mean, bc_sd, ab_mean, ab_sd, rough_c, rough_beta, sigma_rough
-      namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, contact_method, n_ext, n_box, &
-         certified, placement
+      namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
+         n_ext, n_box, certified, placement
       namelist /shells/ nlayer, thickness, thickness_unit, mode, colour
       namelist /output/ directory, name, vrml, vrml_per_layer, tessellation
       namelist /run/ seed
@@ -169,6 +172,7 @@ contains
       max_orientations = cfg%max_orientations
       max_sizes = cfg%max_sizes
       max_shapes = cfg%max_shapes
+      max_failures = cfg%max_failures
       contact_method = cfg%contact_method
       n_ext = cfg%n_ext
       n_box = cfg%n_box
@@ -338,6 +342,10 @@ contains
          call bad("parking", "max_shapes", "= "//to_string(max_shapes)//" must be >= 1")
          return
       end if
+      if (max_failures < 1) then
+         call bad("parking", "max_failures", "= "//to_string(max_failures)//" must be >= 1")
+         return
+      end if
       select case (to_lower(trim(contact_method)))
       case ("eob", "newton_raphson")
          cfg%contact_method = to_lower(trim(contact_method))
@@ -357,6 +365,7 @@ contains
       cfg%max_orientations = max_orientations
       cfg%max_sizes = max_sizes
       cfg%max_shapes = max_shapes
+      cfg%max_failures = max_failures
       cfg%n_ext = n_ext
       cfg%n_box = n_box
       cfg%certified = certified
@@ -537,7 +546,8 @@ contains
              //", sigma_rough = "//to_string(cfg%synthetic%sigma_rough)//" /"//nl
       text = text//"&parking max_locations = "//to_string(cfg%max_locations)//", max_orientations = " &
              //to_string(cfg%max_orientations)//", max_sizes = "//to_string(cfg%max_sizes)//", max_shapes = " &
-             //to_string(cfg%max_shapes)//", contact_method = '"//trim(cfg%contact_method)//"', n_ext = " &
+             //to_string(cfg%max_shapes)//", max_failures = "//to_string(cfg%max_failures) &
+             //", contact_method = '"//trim(cfg%contact_method)//"', n_ext = " &
              //to_string(cfg%n_ext)//", n_box = "//to_string(cfg%n_box)//", certified = " &
              //merge(".true. ", ".false.", cfg%certified)//", placement = '"//trim(cfg%placement)//"' /"//nl
       text = text//"&shells nlayer = "//to_string(cfg%nlayer)//", thickness_unit = '"//trim(cfg%thickness_unit) &

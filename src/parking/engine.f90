@@ -122,7 +122,9 @@ contains
       type(attempt_type), allocatable :: at(:)
       type(void_grid_type) :: vg
       logical :: void
-      integer :: j, npark_sieve0
+      integer :: j, npark_sieve0, failures
+      real(wp) :: carry
+      logical :: reached
       real(wp) :: r_in
       integer, allocatable :: same(:)
       logical, allocatable :: built(:)
@@ -166,12 +168,18 @@ contains
       tlast = t0
 
       void = cfg%placement == "void"
+      carry = 0.0_wp
       do s = 1, cfg%nsieve
-         target = cfg%target_fraction(s) * vbox
+         ! a sieve that reaches its volume ends within half a particle of it; that rounding
+         ! difference (either sign) moves to the next sieve so that the cumulative gradation and
+         ! the total stay on target. A shortfall from exhausted attempts is not carried.
+         target = max(0.0_wp, cfg%target_fraction(s) * vbox + carry)
+         reached = .false.
          vol = 0.0_wp
          attempts_sieve = 0
          nstream = 0
          sieve_done = .false.
+         failures = 0
          if (void .or. .not. lazy) then
             call build_kinds(cfg, model, kinds, same, built, [(k, k=first_kind(s), first_kind(s) + nkind_sieve(s) - 1)], &
                              error)
@@ -200,11 +208,11 @@ contains
             ! parallel), as long as no earlier particle of the batch has moved.
             allocate (at(batch))
             batch_size_now = batch
-            call system_clock(tp1)
             if (lazy) then
                call build_kinds(cfg, model, kinds, same, built, [(first_kind_of(s, nstream + b), b=1, batch)], error)
                if (allocated(error)) return
             end if
+            call system_clock(tp1)
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
             do b = 1, batch
                block
@@ -243,8 +251,14 @@ contains
                attempts = attempts + at(b)%count - merge(1, 0, at(b)%done)
                attempts_sieve = attempts_sieve + at(b)%count - merge(1, 0, at(b)%done)
                if (at(b)%done) then
-                  sieve_done = .true.
-                  exit
+                  ! this particle exhausted its attempts: the sieve ends after max_failures such
+                  ! particles (the thesis: the first); later particles of the batch go on
+                  failures = failures + 1
+                  if (failures >= cfg%max_failures) then
+                     sieve_done = .true.
+                     exit
+                  end if
+                  cycle
                end if
                k = at(b)%k
                sc = at(b)%sc
@@ -252,6 +266,7 @@ contains
                keep = vol + v <= target .or. (vol + v - target) <= (target - vol)
                if (.not. keep) then
                   sieve_done = .true.
+                  reached = .true.
                   exit
                end if
                call add_particle(k, at(b)%c, at(b)%r, sc)
@@ -281,14 +296,16 @@ contains
             end if
          end do
          model%achieved_fraction(s) = vol / vbox
+         reached = reached .or. vol >= target
+         carry = merge(target - vol, 0.0_wp, reached)
          if (present(progress_unit)) then
             call system_clock(t1)
-            write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,f7.1,a)') "sieve ", s, " done: ", model%count(s), &
-               " particles, fraction ", vol / vbox, " (target ", cfg%target_fraction(s), "), ", attempts_sieve, &
-               " attempts, ", real(t1 - t0, wp) / rate, " s"
+            write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,i0,a,f7.1,a)') "sieve ", s, " done: ", &
+               model%count(s), " particles, fraction ", vol / vbox, " (target ", cfg%target_fraction(s), "), ", &
+               attempts_sieve, " attempts, ", failures, " particles not parked, ", real(t1 - t0, wp) / rate, " s"
             if (void) write (progress_unit, '(a,i0,a,f8.5,a,es10.3,a)') "sieve ", s, ": void grid free fraction ", &
                vg%free_fraction(), " (inscribed radius ", r_in, " mm)"
-            if (cfg%target_fraction(s) - vol / vbox > 0.01_wp * cfg%target_fraction(s)) then
+            if (.not. reached .and. cfg%target_fraction(s) - vol / vbox > 0.01_wp * cfg%target_fraction(s)) then
                write (progress_unit, '(a,i0,a,f8.5,a)') "warning: sieve ", s, " ended ", &
                   cfg%target_fraction(s) - vol / vbox, " short of its target (attempts exhausted)"
             end if

@@ -18,8 +18,7 @@ module anm_shells_build
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_synthesize
-   use anm_shells_surface, only: shell_surface_type, new_shell_surface
+   use anm_shells_surface, only: shell_surface_type, new_shell_surface, grid_synthesis, grid_analysis
    use anm_shells_offset, only: offset_grid, offset_counts_type
    implicit none
    private
@@ -335,12 +334,11 @@ contains
       target = default_fit_tol * t
       if (present(fit_tol)) target = fit_tol * t
       allocate (a(0:cap, 0:cap), b(0:cap, 0:cap), fit(size(rt, 1), size(rt, 2)))
-      call grid_analyze(surf, rt, cap, a, b)
-      call new_sh_expansion_real(outer, a, b)
+      call grid_analysis(surf%grid, rt, cap, a, b)
       best = cap
       have_fit = .false.
       if (search) then
-         call sh_synthesize(surf%grid, outer, fit)
+         call grid_synthesis(surf%grid, a, b, cap, fit)
          res = maxval(abs(rt - fit))
          have_fit = .true.
          if (res <= target) then
@@ -349,7 +347,7 @@ contains
             hi = cap
             do while (lo < hi)
                mid = (lo + hi) / 2
-               call sh_synthesize(surf%grid, outer, fit, nused=mid)
+               call grid_synthesis(surf%grid, a, b, mid, fit)
                if (maxval(abs(rt - fit)) <= target) then
                   hi = mid
                else
@@ -360,9 +358,8 @@ contains
          end if
       end if
       if (.not. have_fit) then
-         ! (otherwise outer and fit already hold the full order cap)
-         call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
-         call sh_synthesize(surf%grid, outer, fit)
+         ! (otherwise fit already holds the full order cap)
+         call grid_synthesis(surf%grid, a, b, best, fit)
       end if
       ! one-sided correction: lift the fit where it lies inside R_t (creases) until it lies inside
       ! by at most inside_tol t at every node
@@ -373,23 +370,23 @@ contains
       do while (lift .and. worst > inside_tol * t .and. report%lifts < max_lifts)
          ! only the nodes that violate the bound, lifted to half of it (little overshoot)
          deficit = max(0.0_wp, rt - fit - 0.5_wp * inside_tol * t)
-         ! sums over the violating nodes only when they are few (cost per node ~ order^2 against
+         ! sums over the violating nodes only when they are few (cost per node ~ 2 order against
          ! ~ 2 nphi order per grid row for the dense transform)
-         if (count(deficit > 0.0_wp) * (best + 1) < 2 * size(rt)) then
+         if (4 * count(deficit > 0.0_wp) < size(rt)) then
             call sparse_analyze(surf, deficit, best, da, db)
          else
-            call grid_analyze(surf, deficit, best, da, db)
+            call grid_analysis(surf%grid, deficit, best, da, db)
          end if
          a(0:best, 0:best) = a(0:best, 0:best) + factor * da
          b(0:best, 0:best) = b(0:best, 0:best) + factor * db
-         call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
-         call sh_synthesize(surf%grid, outer, fit)
+         call grid_synthesis(surf%grid, a, b, best, fit)
          report%lifts = report%lifts + 1
          previous = worst
          worst = maxval(rt - fit)
          ! slow progress (the projection spreads a narrow deficit thinly): lift harder next time
          if (worst > 0.5_wp * previous) factor = min(max_lift_factor, 2.0_wp * factor)
       end do
+      call new_sh_expansion_real(outer, a(0:best, 0:best), b(0:best, 0:best))
       report%order = best
       report%fit_residual = maxval(abs(rt - fit))
       report%fit_inside = max(0.0_wp, maxval(rt - fit))
@@ -403,68 +400,39 @@ contains
       report%layer_fraction = report%shell_fraction
    end subroutine fit_outer
 
-   !> `sh_analyze` with both stages as matrix products (the azimuthal sums over whole rows of
-   !> the grid, then the Legendre sums): same coefficients, a few times faster.
-   pure subroutine grid_analyze(surf, f, nmax, a, b)
-      type(shell_surface_type), intent(in) :: surf
-      real(wp), intent(in) :: f(:, :)
-      integer, intent(in) :: nmax
-      real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp), allocatable :: tt(:, :), fcs(:, :)
-      integer :: i, j, m, k0, lm
-
-      lm = surf%grid%lmax
-      ! contiguous (nphi, 2 nmax + 1) table of cos(m phi) then sin(m phi): one product in the
-      ! library's blocked path (a transposed section argument takes its slow strided path)
-      allocate (tt(size(f, 2), 2 * nmax + 1))
-      do j = 1, size(f, 2)
-         tt(j, 1:nmax + 1) = surf%grid%trig(1:nmax + 1, j)
-         tt(j, nmax + 2:2 * nmax + 1) = surf%grid%trig(lm + 2:lm + 1 + nmax, j)
-      end do
-      fcs = matmul(f, tt)
-      a = 0.0_wp
-      b = 0.0_wp
-      do i = 1, size(f, 1)
-         fcs(i, :) = fcs(i, :) * surf%grid%sphere%weight(i)
-      end do
-      do m = 0, nmax
-         k0 = surf%grid%idx(m)
-         a(m:nmax, m) = merge(1.0_wp, 2.0_wp, m == 0) * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, m + 1))
-         if (m > 0) b(m:nmax, m) = 2.0_wp * matmul(surf%grid%plm(k0:k0 + nmax - m, :), fcs(:, nmax + 1 + m))
-      end do
-   end subroutine grid_analyze
-
-   !> `grid_analyze` of a function that vanishes at most nodes (the deficit of a lift): the
-   !> quadrature sums run over the nonzero nodes only.
+   !> `grid_analysis` of a function that vanishes at most nodes (the deficit of a lift): per ring,
+   !> the azimuthal sums over its nonzero nodes only, then the Legendre sums for the rings that
+   !> have any.
    pure subroutine sparse_analyze(surf, f, nmax, a, b)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: f(:, :)
       integer, intent(in) :: nmax
       real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
-      real(wp) :: wf, c, sn
-      integer :: i, j, m, n, k0, lm
+      real(wp) :: cs(0:nmax), ss(0:nmax), wf
+      integer :: i, j, m, k0, lm
+      logical :: nonzero
 
       a = 0.0_wp
       b = 0.0_wp
       lm = surf%grid%lmax
-      do j = 1, size(f, 2)
-         do i = 1, size(f, 1)
+      do i = 1, size(f, 1)
+         cs = 0.0_wp
+         ss = 0.0_wp
+         nonzero = .false.
+         do j = 1, size(f, 2)
             if (f(i, j) == 0.0_wp) cycle
-            wf = f(i, j) * surf%grid%sphere%weight(i)
-            do m = 0, nmax
-               k0 = surf%grid%idx(m)
-               if (m == 0) then
-                  c = wf
-                  sn = 0.0_wp
-               else
-                  c = 2.0_wp * wf * surf%grid%trig(m + 1, j)
-                  sn = 2.0_wp * wf * surf%grid%trig(lm + 1 + m, j)
-               end if
-               do n = m, nmax
-                  a(n, m) = a(n, m) + c * surf%grid%plm(k0 + n - m, i)
-                  b(n, m) = b(n, m) + sn * surf%grid%plm(k0 + n - m, i)
-               end do
-            end do
+            nonzero = .true.
+            wf = 2.0_wp * f(i, j) * surf%grid%sphere%weight(i)
+            cs = cs + wf * surf%grid%trig(1:nmax + 1, j)
+            ss(1:nmax) = ss(1:nmax) + wf * surf%grid%trig(lm + 2:lm + 1 + nmax, j)
+         end do
+         if (.not. nonzero) cycle
+         ! (order 0 carries the weight once)
+         cs(0) = 0.5_wp * cs(0)
+         do m = 0, nmax
+            k0 = surf%grid%idx(m)
+            a(m:nmax, m) = a(m:nmax, m) + cs(m) * surf%grid%plm(k0:k0 + nmax - m, i)
+            if (m > 0) b(m:nmax, m) = b(m:nmax, m) + ss(m) * surf%grid%plm(k0:k0 + nmax - m, i)
          end do
       end do
    end subroutine sparse_analyze

@@ -19,9 +19,10 @@
 !>     call offset_grid(surf, t, rt, counts)               ! R_t at every node of surf%grid
 !>     call offset_radius(surf, theta, phi, t, rt, used_fallback)
 module anm_shells_offset
+   use, intrinsic :: iso_c_binding, only: c_bool
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_shells_surface, only: shell_surface_type, eval_surface, eval_surface_many, surface_frame, surface_frame_trig, &
-      & surface_distance, cross3
+      & surface_distance, cross3, node_geometry, column_geometry
    implicit none
    private
 
@@ -42,8 +43,9 @@ module anm_shells_offset
    integer, parameter :: max_newton = 30
    !> Newton gives up where |sin(theta')| falls below this (the poles of the parametrisation).
    real(wp), parameter :: pole_sin = 1.0e-6_wp
-   !> Points per call of `eval_surface_many`.
-   integer, parameter :: eval_block = 256
+   !> Slots of the first Newton pass (directions in flight; its working arrays, some 150 kB on the
+   !> stack).
+   integer, parameter :: pool = 1024
    !> Directions per call of `newton_lanes` (four AVX-512 registers per quantity).
    integer, parameter :: step_lanes = 32
 
@@ -129,17 +131,19 @@ contains
       !> How the directions were solved.
       type(offset_counts_type), intent(out) :: counts
       real(wp), allocatable :: lower(:, :), foot(:, :, :), fx(:, :, :)
-      integer, allocatable :: start(:, :, :)
-      logical, allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
-      real(wp) :: ts, ps, rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
+      integer, allocatable :: start(:, :)
+      ! (one-byte flags and one start index per node: less fresh memory per shell)
+      logical(c_bool), allocatable :: solved(:, :), from_nb(:, :), changed(:, :), dirty(:, :)
+      real(wp) :: rho, jump2, tol, u(3), e1(3), e2(3), th, ph, xf(3)
       integer :: nt, np, i, j, k, ii, jj, pass, nev
       logical :: ok, any_change
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
-      allocate (lower(nt, np), start(2, nt, np), foot(2, nt, np), fx(3, nt, np), solved(nt, np), &
-                from_nb(nt, np), changed(nt, np), dirty(nt, np))
+      allocate (lower(nt, np), start(nt, np))
       call sampled_starts(surf, t, lower, start)
+      ! (allocated after the sampled bounds, whose working arrays they may reuse)
+      allocate (foot(2, nt, np), fx(3, nt, np), solved(nt, np), from_nb(nt, np), changed(nt, np), dirty(nt, np))
       tol = bound_tol * (surf%rmax + t)
       jump2 = (jump_factor * surf%hmax)**2
       from_nb = .false.
@@ -197,110 +201,114 @@ contains
       do j = 1, np
          do i = 1, nt
             if (solved(i, j)) cycle
-            call definition_radius(surf, surf%u(:, i, j), t, rt(i, j))
+            call node_frame(surf, i, j, u, e1, e2)
+            call definition_radius(surf, u, t, rt(i, j))
          end do
       end do
    end subroutine offset_grid
 
-   !> Newton from every node's sampled start, all directions together: the first step from the
-   !> tabulated derivatives, then rounds of exact evaluations of the directions still running,
-   !> `eval_block` points per call of `eval_surface_many`.
+   !> Newton from every node's sampled start, each direction independently, through a pool of
+   !> `pool` slots: directions enter the pool in order with the tabulated derivatives of their
+   !> start sample (the first step needs no evaluation); each round takes one Newton step for every
+   !> slot (`newton_lanes` on `step_lanes` consecutive slots at a time), retires the finished
+   !> directions, keeps the others in order and evaluates the expansion at their new points
+   !> (`eval_surface_many`). The groups of lanes stay full (only the last group of a round is
+   !> short) and the working arrays are per slot (lane-major, small, on the stack) instead of per
+   !> direction of the grid.
    pure subroutine first_pass(surf, t, start, lower, tol, rt, solved, foot, fx, nev)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t, lower(:, :), tol
-      integer, intent(in) :: start(:, :, :)
+      integer, intent(in) :: start(:, :)
       real(wp), intent(out) :: rt(:, :), foot(:, :, :), fx(:, :, :)
-      logical, intent(out) :: solved(:, :)
+      logical(c_bool), intent(out) :: solved(:, :)
       integer, intent(inout) :: nev
-      real(wp), allocatable :: ts(:), ps(:), f(:, :), sc(:, :), bt(:), bp(:), bf(:, :), bsc(:, :)
-      integer, allocatable :: state(:), run(:), next(:)
-      real(wp), dimension(step_lanes, 3) :: lu, le1, le2, lxf
-      real(wp) :: lf(step_lanes, 6), lsc(step_lanes, 4)
-      real(wp), dimension(step_lanes) :: lrn, lts, lps, lrho
+      ! (the columns of the lane-major arrays are padded: a power-of-two stride would map a slot's
+      ! entries to the same cache set)
+      real(wp) :: ts(pool), ps(pool), f(pool + 8, 6), sc(pool + 8, 4), node(pool + 8, 4), rn(pool)
+      integer :: di(pool), dj(pool), steps(pool)
+      real(wp) :: lxf(step_lanes, 3), lrho(step_lanes)
       integer :: lstate(step_lanes)
-      integer :: nt, np, n, k, i, j, it, nrun, nnext, b0, b1, is, js, lm, l, nl
+      integer :: nt, np, n, k, knext, na, nkeep, i, j, b0, is, js, lm, l, nl, c
 
       nt = size(rt, 1)
       np = size(rt, 2)
       n = nt * np
       lm = surf%grid%lmax
-      allocate (ts(n), ps(n), f(6, n), sc(4, n), state(n), run(n), next(n), bt(eval_block), bp(eval_block), bf(6, eval_block), &
-                bsc(4, eval_block))
-      do j = 1, np
-         do i = 1, nt
-            k = i + (j - 1) * nt
-            is = start(1, i, j)
-            js = start(2, i, j)
-            ts(k) = surf%grid%sphere%theta(is)
-            ps(k) = surf%grid%sphere%phi(js)
-            ! sin/cos of the start node from the grid's tables
-            sc(:, k) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
-            state(k) = newton_state%running
-         end do
-      end do
       rt = 0.0_wp
       fx = 0.0_wp
-      nrun = n
-      run = [(k, k = 1, n)]
-      do it = 1, max_newton
-         ! one Newton step for the running directions, `step_lanes` at a time
-         nnext = 0
-         do b0 = 1, nrun, step_lanes
-            nl = min(step_lanes, nrun - b0 + 1)
-            do l = 1, step_lanes
-               ! short groups repeat their first direction (results discarded)
-               k = run(b0 + merge(l, 1, l <= nl) - 1)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
-               call node_frame(surf, i, j, lu(l, :), le1(l, :), le2(l, :))
-               lrn(l) = surf%r(i, j)
-               if (it == 1) then
-                  ! the first step from the tabulated derivatives of the start sample
-                  lf(l, :) = surf%f(:, start(1, i, j), start(2, i, j))
-               else
-                  lf(l, :) = f(:, k)
-               end if
-               lsc(l, :) = sc(:, k)
-               lts(l) = ts(k)
-               lps(l) = ps(k)
-            end do
-            call newton_lanes(lu, le1, le2, t, lrn, lf, lsc, lts, lps, lstate, lrho, lxf)
+      ! slots never filled take part in short groups: harmless values (the equator)
+      ts = 0.5_wp * pi
+      ps = 0.0_wp
+      f = 1.0_wp
+      sc = 0.0_wp
+      sc(:, 1) = 1.0_wp
+      sc(:, 4) = 1.0_wp
+      node = sc
+      rn = 1.0_wp
+      knext = 1
+      na = 0
+      do
+         ! fill the free slots with the next directions (node (i, j) is direction i + (j - 1) nt)
+         do while (na < pool .and. knext <= n)
+            na = na + 1
+            k = knext
+            knext = knext + 1
+            i = 1 + modulo(k - 1, nt)
+            j = 1 + (k - 1) / nt
+            is = 1 + modulo(start(i, j) - 1, nt)
+            js = 1 + (start(i, j) - 1) / nt
+            di(na) = i
+            dj(na) = j
+            steps(na) = 0
+            ts(na) = surf%grid%sphere%theta(is)
+            ps(na) = surf%grid%sphere%phi(js)
+            ! sin/cos of the start node from the grid's tables, derivatives from the sample's table
+            sc(na, :) = [surf%grid%sphere%sint(is), surf%grid%sphere%x(is), surf%grid%trig(lm + 2, js), surf%grid%trig(2, js)]
+            f(na, :) = surf%f(:, is, js)
+            node(na, :) = [surf%grid%sphere%sint(i), surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(lm + 2, j)]
+            rn(na) = surf%r(i, j)
+         end do
+         if (na == 0) exit
+         ! one Newton step for every slot, `step_lanes` at a time (a short last group runs on
+         ! stale or never-filled slots, results discarded); the running ones are kept in order
+         nkeep = 0
+         do b0 = 1, na, step_lanes
+            nl = min(step_lanes, na - b0 + 1)
+            call newton_lanes(pool + 8, node(b0, 1), t, rn(b0), f(b0, 1), sc(b0, 1), ts(b0), ps(b0), lstate, lrho, lxf)
             do l = 1, nl
-               k = run(b0 + l - 1)
-               i = 1 + modulo(k - 1, nt)
-               j = 1 + (k - 1) / nt
-               ts(k) = lts(l)
-               ps(k) = lps(l)
-               state(k) = lstate(l)
-               if (lstate(l) == newton_state%running) then
-                  nnext = nnext + 1
-                  next(nnext) = k
-               else if (lstate(l) == newton_state%converged) then
+               c = b0 + l - 1
+               i = di(c)
+               j = dj(c)
+               if (lstate(l) == newton_state%running .and. steps(c) + 1 < max_newton) then
+                  ! (nkeep <= c: the slot moves down or stays)
+                  nkeep = nkeep + 1
+                  di(nkeep) = i
+                  dj(nkeep) = j
+                  steps(nkeep) = steps(c) + 1
+                  ts(nkeep) = ts(c)
+                  ps(nkeep) = ps(c)
+                  node(nkeep, :) = node(c, :)
+                  rn(nkeep) = rn(c)
+                  cycle
+               end if
+               ! retired: converged, failed, or still running after max_newton steps (whose
+               ! evaluation after the last step is counted as in a plain loop over the steps)
+               if (lstate(l) == newton_state%running) nev = nev + 1
+               solved(i, j) = .false.
+               if (lstate(l) == newton_state%converged) then
                   rt(i, j) = lrho(l)
                   fx(:, i, j) = lxf(l, :)
+                  solved(i, j) = rt(i, j) >= lower(i, j) - tol
                end if
+               if (.not. solved(i, j)) rt(i, j) = 0.0_wp
+               foot(:, i, j) = [ts(c), ps(c)]
             end do
          end do
-         nrun = nnext
-         run(1:nrun) = next(1:nrun)
-         if (nrun == 0) exit
-         do b0 = 1, nrun, eval_block
-            b1 = min(nrun, b0 + eval_block - 1)
-            bt(1:b1 - b0 + 1) = ts(run(b0:b1))
-            bp(1:b1 - b0 + 1) = ps(run(b0:b1))
-            call eval_surface_many(surf, bt(1:b1 - b0 + 1), bp(1:b1 - b0 + 1), bf(:, 1:b1 - b0 + 1), bsc(:, 1:b1 - b0 + 1))
-            f(:, run(b0:b1)) = bf(:, 1:b1 - b0 + 1)
-            sc(:, run(b0:b1)) = bsc(:, 1:b1 - b0 + 1)
-         end do
-         nev = nev + nrun
-      end do
-      do j = 1, np
-         do i = 1, nt
-            k = i + (j - 1) * nt
-            solved(i, j) = state(k) == newton_state%converged .and. rt(i, j) >= lower(i, j) - tol
-            if (.not. solved(i, j)) rt(i, j) = 0.0_wp
-            foot(:, i, j) = [ts(k), ps(k)]
-         end do
+         na = nkeep
+         if (na > 0) then
+            call eval_surface_many(surf, ts(1:na), ps(1:na), f(1:na, :), sc(1:na, :))
+            nev = nev + na
+         end if
       end do
    end subroutine first_pass
 
@@ -344,7 +352,8 @@ contains
    end subroutine neighbour
 
    !> Per direction node: the largest sampled lower bound m(u) = max_s g_u(x_s) (-huge if no sample
-   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction).
+   !> is within t of the ray) and the start sample (best g, else best-aligned offset direction),
+   !> start = i + (j - 1) ntheta for sample (i, j).
    !> The samples form cells (grid-adjacent quadruples, the polar caps closed by triangles to the
    !> pole); the offset map sends a cell to the spherical patch spanned by its corners' offset
    !> directions, so each cell's corners must be tried on the direction nodes inside the
@@ -357,58 +366,86 @@ contains
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: t
       real(wp), intent(out) :: lower(:, :)
-      integer, intent(out) :: start(:, :, :)
-      real(wp), allocatable :: qd(:, :, :), qth(:, :), qph(:, :), align(:, :), xx(:, :)
-      real(wp) :: q(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi
-      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0
-      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc
-      logical :: all_phi
+      integer, intent(out) :: start(:, :)
+      real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
+      real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
+      real(wp), allocatable :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
+      integer, allocatable :: rows(:)
+      real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi, rscale
+      real(wp) :: pole(3), pole_dir(3, 2), xs(3), xxs, du, perp2, dd, ph0, w
+      integer :: nt, np, i, j, ii, jb, ia, ja, jc, i0, i1, j0, ncol, kc, jn(3), lm, code
+      logical :: all_phi, have_qd
 
       nt = surf%grid%sphere%ntheta
       np = surf%grid%sphere%nphi
+      lm = surf%grid%lmax
       dphi = two_pi / np
-      allocate (qd(3, nt, np), qth(nt, np), qph(nt, np), align(nt, np), xx(nt, np))
+      allocate (qth(nt, np), qph(nt, np), align(nt, np), qx(nt), qy(nt), qz(nt), qn(nt), bthlo(nt), bthhi(nt), &
+                bphlo(nt), bphhi(nt), px(nt), py(nt), pz(nt), nx(nt), ny(nt), nz(nt))
+      ! offset points x + t n of the samples (and their sums over the first and last rings, towards
+      ! the poles), the polar angles and azimuths of their directions (one column at a time in
+      ! plain loops: the compiler vectorises acos and atan2)
+      pole_dir = 0.0_wp
       do j = 1, np
+         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
          do i = 1, nt
-            q = surf%x(:, i, j) + t * surf%n(:, i, j)
-            qd(:, i, j) = q / sqrt(dot_product(q, q))
-            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qd(3, i, j))))
-            qph(i, j) = atan2(qd(2, i, j), qd(1, i, j))
-            xx(i, j) = dot_product(surf%x(:, i, j), surf%x(:, i, j))
-            start(:, i, j) = [i, j]
+            qx(i) = px(i) + t * nx(i)
+            qy(i) = py(i) + t * ny(i)
+            qz(i) = pz(i) + t * nz(i)
+            qn(i) = sqrt(qx(i) * qx(i) + qy(i) * qy(i) + qz(i) * qz(i))
          end do
+         do i = 1, nt
+            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qz(i) / qn(i))))
+            qph(i, j) = atan2(qy(i) / qn(i), qx(i) / qn(i))
+         end do
+         pole_dir(:, 1) = pole_dir(:, 1) + [qx(1), qy(1), qz(1)]
+         pole_dir(:, 2) = pole_dir(:, 2) + [qx(nt), qy(nt), qz(nt)]
+         start(:, j) = [(i + (j - 1) * nt, i = 1, nt)]
       end do
       do kc = 1, 2
-         ii = merge(1, nt, kc == 1)
-         pole = 0.0_wp
-         do j = 1, np
-            pole = pole + surf%x(:, ii, j) + t * surf%n(:, ii, j)
-         end do
-         pole_dir(:, kc) = pole / norm2(pole)
+         pole_dir(:, kc) = pole_dir(:, kc) / norm2(pole_dir(:, kc))
       end do
+      rows = row_table(surf%grid%sphere%theta)
+      rscale = size(rows) / pi
       lower = -huge(1.0_wp)
       align = -2.0_wp
       mth = 0.25_wp * pi / nt
       mph = 0.25_wp * dphi
       t2 = t * t
       do j = 1, np
-         do i = 1, nt
-            ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
-            ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1,
-            ! and across a pole the pole's offset direction (the polar triangles). Every pair
-            ! (node, corner) of a cell box is in it; near the poles, where a cell's box is a whole
-            ! ring, each pair is tried once instead of once per cell.
-            ph0 = qph(i, j)
-            thlo = pi
-            thhi = 0.0_wp
-            phlo = 0.0_wp
-            phhi = 0.0_wp
-            do jc = -1, 1
-               jb = 1 + modulo(j + jc - 1, np)
-               do ii = max(1, i - 1), min(nt, i + 1)
-                  call widen(qth(ii, jb), qph(ii, jb), ph0, thlo, thhi, phlo, phhi)
+         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
+         ! sample (i, j) is tried on the nodes in the box of the union of the (up to four) cells
+         ! it is a corner of: the offset directions of rows i - 1..i + 1, columns j - 1..j + 1
+         ! (azimuths relative to the sample's own, unwrapped), and across a pole the pole's offset
+         ! direction (the polar triangles). Every pair (node, corner) of a cell box is in it; near
+         ! the poles, where a cell's box is a whole ring, each pair is tried once instead of once
+         ! per cell. The boxes of a column first, in plain loops over the rows.
+         jn = [1 + modulo(j - 2, np), j, 1 + modulo(j, np)]
+         bthlo = pi
+         bthhi = 0.0_wp
+         bphlo = 0.0_wp
+         bphhi = 0.0_wp
+         do jc = 1, 3
+            jb = jn(jc)
+            do ii = -1, 1
+               do i = max(1, 1 - ii), min(nt, nt - ii)
+                  bthlo(i) = min(bthlo(i), qth(i + ii, jb))
+                  bthhi(i) = max(bthhi(i), qth(i + ii, jb))
+                  ! qph values are atan2 values in [-pi, pi]: one turn at most brings the
+                  ! difference into [-pi, pi)
+                  d = qph(i + ii, jb) - qph(i, j)
+                  d = merge(d - two_pi, merge(d + two_pi, d, d < -pi), d >= pi)
+                  bphlo(i) = min(bphlo(i), d)
+                  bphhi(i) = max(bphhi(i), d)
                end do
             end do
+         end do
+         do i = 1, nt
+            ph0 = qph(i, j)
+            thlo = bthlo(i)
+            thhi = bthhi(i)
+            phlo = bphlo(i)
+            phhi = bphhi(i)
             if (i == 1 .or. i == nt) then
                pole = pole_dir(:, merge(1, 2, i == 1))
                d = acos(max(-1.0_wp, min(1.0_wp, pole(3))))
@@ -420,16 +457,20 @@ contains
                   call widen(d, atan2(pole(2), pole(1)), ph0, thlo, thhi, phlo, phhi)
                end if
             end if
+            ! the sample's offset direction, normalised when first needed
+            xs = [px(i), py(i), pz(i)]
+            q = xs + t * [nx(i), ny(i), nz(i)]
+            have_qd = .false.
             all_phi = phhi - phlo > pi
             if (all_phi) then
                ! the patch holds a pole
-               if (qd(3, i, j) > 0.0_wp) then
+               if (q(3) > 0.0_wp) then
                   thlo = 0.0_wp
                else
                   thhi = pi
                end if
             end if
-            call row_range(surf%grid%sphere%theta, thlo - mth, thhi + mth, i0, i1)
+            call row_range(surf%grid%sphere%theta, rows, rscale, thlo - mth, thhi + mth, i0, i1)
             if (all_phi) then
                j0 = 1
                ncol = np
@@ -439,12 +480,16 @@ contains
                j0 = ceiling(phlo / dphi) + 1
                ncol = floor(phhi / dphi) + 2 - j0
             end if
-            xs = surf%x(:, i, j)
-            xxs = xx(i, j)
+            xxs = dot_product(xs, xs)
+            code = i + (j - 1) * nt
+            ja = 1 + modulo(j0 - 2, np)
             do jc = 1, ncol
-               ja = 1 + modulo(j0 + jc - 2, np)
+               ja = ja + 1
+               if (ja > np) ja = 1
+               ! node direction (sin t cos p, sin t sin p, cos t): u . xs = sin t w + cos t xs(3)
+               w = surf%grid%trig(2, ja) * xs(1) + surf%grid%trig(lm + 2, ja) * xs(2)
                do ia = i0, i1
-                  du = surf%u(1, ia, ja) * xs(1) + surf%u(2, ia, ja) * xs(2) + surf%u(3, ia, ja) * xs(3)
+                  du = surf%grid%sphere%sint(ia) * w + surf%grid%sphere%x(ia) * xs(3)
                   perp2 = xxs - du * du
                   if (perp2 < t2) then
                      ! g_u = du + sqrt(t^2 - perp^2) > bound, decided without the square root
@@ -452,14 +497,19 @@ contains
                      dd = max(lower(ia, ja) - du, -1.0_wp)
                      if (dd < 0.0_wp .or. t2 - perp2 > dd * dd) then
                         lower(ia, ja) = du + sqrt(t2 - perp2)
-                        start(:, ia, ja) = [i, j]
+                        start(ia, ja) = code
                      end if
                   else if (lower(ia, ja) == -huge(1.0_wp)) then
                      ! no sample within t of this ray yet: the best-aligned offset direction
-                     c = dot_product(surf%u(:, ia, ja), qd(:, i, j))
+                     if (.not. have_qd) then
+                        qd = q / sqrt(dot_product(q, q))
+                        have_qd = .true.
+                     end if
+                     c = surf%grid%sphere%sint(ia) * (surf%grid%trig(2, ja) * qd(1) + surf%grid%trig(lm + 2, ja) * qd(2)) &
+                         + surf%grid%sphere%x(ia) * qd(3)
                      if (c > align(ia, ja)) then
                         align(ia, ja) = c
-                        start(:, ia, ja) = [i, j]
+                        start(ia, ja) = code
                      end if
                   end if
                end do
@@ -486,16 +536,48 @@ contains
       phhi = max(phhi, d)
    end subroutine widen
 
-   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i); i1 < i0 when none.
-   pure subroutine row_range(theta, lo, hi, i0, i1)
-      real(wp), intent(in) :: theta(:), lo, hi
+   !> Table for `row_range`: rows(b) = the first row with theta >= b pi / nb, b = 0..nb - 1, nb at
+   !> least 64 times the row count (so that few values share a bin with a row: the correction in
+   !> `first_at_least` is then rarely taken) and such that no bin holds two rows (an empty table
+   !> when theta does not increase: `row_range` then scans).
+   pure function row_table(theta) result(rows)
+      real(wp), intent(in) :: theta(:)
+      integer, allocatable :: rows(:)
+      integer :: n, nb, b, k
+
+      n = size(theta)
+      allocate (rows(0))
+      if (n < 2) return
+      if (any(theta(2:n) <= theta(1:n - 1))) return
+      nb = 64 * n
+      do while (nb < 1024 * n)
+         if (all(theta(2:n) - theta(1:n - 1) > pi / nb)) exit
+         nb = 2 * nb
+      end do
+      deallocate (rows)
+      allocate (rows(0:nb - 1))
+      k = 1
+      do b = 0, nb - 1
+         do while (k <= n)
+            if (theta(k) >= b * (pi / nb)) exit
+            k = k + 1
+         end do
+         rows(b) = k
+      end do
+   end function row_table
+
+   !> Rows i0..i1 whose theta lies in [lo, hi] (theta monotone in i, `rows` from `row_table`,
+   !> scale = size(rows) / pi); i1 < i0 when none.
+   pure subroutine row_range(theta, rows, scale, lo, hi, i0, i1)
+      real(wp), intent(in) :: theta(:), scale, lo, hi
+      integer, intent(in) :: rows(0:)
       integer, intent(out) :: i0, i1
       integer :: i
       i0 = size(theta) + 1
       i1 = 0
-      if (theta(1) <= theta(size(theta))) then
-         i0 = first_at_least(theta, lo)
-         i1 = first_at_least(theta, hi) - 1
+      if (size(rows) > 0) then
+         i0 = first_at_least(theta, rows, scale, lo)
+         i1 = first_at_least(theta, rows, scale, hi) - 1
          if (i1 < size(theta)) then
             if (theta(i1 + 1) <= hi) i1 = i1 + 1
          end if
@@ -509,13 +591,15 @@ contains
       end if
    end subroutine row_range
 
-   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): a guess from the
-   !> asymptotic Gauss-Legendre nodes, theta_i ~ pi (i - 1/4) / (n + 1/2), corrected by a walk.
-   pure function first_at_least(theta, v) result(k)
-      real(wp), intent(in) :: theta(:), v
+   !> Smallest i with theta(i) >= v for increasing theta (size + 1 if none): the table's row for
+   !> the bin of v, corrected by a walk (at most one row holds in a bin).
+   pure function first_at_least(theta, rows, scale, v) result(k)
+      real(wp), intent(in) :: theta(:), scale, v
+      integer, intent(in) :: rows(0:)
       integer :: k, n
       n = size(theta)
-      k = max(1, min(n, nint(v * (n + 0.5_wp) / pi + 0.25_wp)))
+      k = rows(int(max(0.0_wp, min(real(size(rows) - 1, wp), v * scale))))
+      ! (the walks take a step only at a row inside the bin of v, or by rounding of the bin)
       do while (k > 1)
          if (theta(k - 1) < v) exit
          k = k - 1
@@ -622,18 +706,36 @@ contains
    end subroutine newton_update
 
    !> `newton_update` for `step_lanes` directions at once (one direction per lane; arrays
-   !> (lane, component), branches as masks), the same arithmetic and the same outcomes.
-   pure subroutine newton_lanes(u, e1, e2, t, rnode, f, sc, ts, ps, state, rho, xf)
-      real(wp), intent(in) :: u(step_lanes, 3), e1(step_lanes, 3), e2(step_lanes, 3), t, rnode(step_lanes)
-      real(wp), intent(in) :: f(step_lanes, 6), sc(step_lanes, 4)
+   !> (lane, component), branches as masks), the same arithmetic and the same outcomes. The
+   !> lane inputs are the first `step_lanes` rows of arrays with leading dimension ld (node: the
+   !> node's sin theta, cos theta, cos phi, sin phi; f and sc as from `eval_surface_many`).
+   pure subroutine newton_lanes(ld, nodein, t, rnode, fin, scin, ts, ps, state, rho, xf)
+      integer, intent(in) :: ld
+      real(wp), intent(in) :: nodein(ld, 4), t, rnode(step_lanes)
+      real(wp), intent(in) :: fin(ld, 6), scin(ld, 4)
       real(wp), intent(inout) :: ts(step_lanes), ps(step_lanes)
       integer, intent(out) :: state(step_lanes)
       real(wp), intent(out) :: rho(step_lanes), xf(step_lanes, 3)
-      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2
+      real(wp) :: node(step_lanes, 4), f(step_lanes, 6), sc(step_lanes, 4)
+      real(wp), dimension(step_lanes, 3) :: rh, th, x, xt, xp, xtt, xtp, xpp, nv, nh, nt, np, q, qt, qp, x2, u, e1, e2
       real(wp), dimension(step_lanes) :: st, ct, sp, cp, sgn, nn, inn, dnt, dnp, f1, f2, j11, j12, j21, j22, det, &
-                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1
+                                         dt, dp, h11, h12, h22, du, perp2, big, lam, cu, a, r1, sts
       logical, dimension(step_lanes) :: good, finish, ok
       integer :: c
+
+      node = nodein(1:step_lanes, :)
+      f = fin(1:step_lanes, :)
+      sc = scin(1:step_lanes, :)
+      ! the node's direction u and the perpendicular unit vectors theta-hat, phi-hat (`node_frame`)
+      u(:, 1) = node(:, 1) * node(:, 3)
+      u(:, 2) = node(:, 1) * node(:, 4)
+      u(:, 3) = node(:, 2)
+      e1(:, 1) = node(:, 2) * node(:, 3)
+      e1(:, 2) = node(:, 2) * node(:, 4)
+      e1(:, 3) = -node(:, 1)
+      e2(:, 1) = -node(:, 4)
+      e2(:, 2) = node(:, 3)
+      e2(:, 3) = 0.0_wp
 
       st = sc(:, 1)
       ct = sc(:, 2)
@@ -725,8 +827,10 @@ contains
       end where
       state = newton_state%failed
       where (ok .and. rho > rnode) state = newton_state%converged
+      ! (sin of every lane, unconditionally: one vector call)
+      sts = abs(sin(ts))
       where (good .and. .not. finish)
-         state = merge(newton_state%running, newton_state%failed, abs(sin(ts)) >= pole_sin)
+         state = merge(newton_state%running, newton_state%failed, sts >= pole_sin)
       end where
    end subroutine newton_lanes
 
@@ -759,7 +863,7 @@ contains
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: u(3), t
       real(wp), intent(out) :: ts, ps
-      real(wp) :: q(3), c, best, alpha, tu, pu, width, dphi
+      real(wp) :: q(3), c, best, alpha, tu, pu, width, dphi, xs(3), ns(3)
       integer :: i, j, jj, ib, jb, nt, np, j0, ncol
       logical :: all_phi
 
@@ -789,7 +893,8 @@ contains
          j = 1 + modulo(j0 + jj - 2, np)
          do i = 1, nt
             if (abs(surf%grid%sphere%theta(i) - tu) > alpha) cycle
-            q = surf%x(:, i, j) + t * surf%n(:, i, j)
+            call node_geometry(surf, i, j, xs, ns)
+            q = xs + t * ns
             c = dot_product(q, u) / norm2(q)
             if (c > best) then
                best = c

@@ -1,6 +1,7 @@
 !> Per-shape surface data for shell construction: a pointwise evaluator of r and its first and
-!> second angular derivatives, a dense sample of surface points and normals on a Gauss grid, and
-!> the distance from a point to the particle surface (the definition of a shell).
+!> second angular derivatives, a dense sample of r and its derivatives on a Gauss grid (surface
+!> points and normals follow from them), syntheses and analyses on that grid, and the distance
+!> from a point to the particle surface (the definition of a shell).
 !>
 !> The distance query uses the star shape: a surface point x within distance D of a point y
 !> (|y| > D) lies in the cone of half-angle asin(D/|y|) about y, so only the grid samples in that
@@ -11,10 +12,14 @@
 !>     call new_shell_surface(surf, shape, 120)
 !>     call surface_distance(surf, y, tcut, d, theta_c, phi_c)   ! d > tcut means "farther"
 !>     call eval_surface(surf, theta, phi, f)                     ! f = r, r_t, r_p, r_tt, r_tp, r_pp
+!>     call node_geometry(surf, i, j, x, n)                       ! sample point and normal
+!>     call grid_synthesis(surf%grid, a, b, l, values)            ! (a, b) of degree l on the grid
 module anm_shells_surface
    use anm_core_kinds, only: wp, pi, two_pi
-   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_sh_grid, only: sh_grid_type, new_sh_grid, sh_synthesize
+   use anm_sh_expansion, only: sh_expansion_type
+   use anm_sh_grid, only: sh_grid_type
+   use anm_sh_quadrature, only: new_sphere_grid
+   use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, packed_size
    implicit none
    private
 
@@ -23,7 +28,8 @@ module anm_shells_surface
    integer, parameter :: lanes = 32
 
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
-      & surface_frame_trig, surface_distance, closest_point, cross3
+      & surface_frame_trig, surface_distance, closest_point, cross3, grid_synthesis, grid_analysis, &
+      & node_geometry, column_geometry
 
    !> Immutable per-shape data (safe to share between threads).
    type :: shell_surface_type
@@ -31,18 +37,14 @@ module anm_shells_surface
       type(sh_expansion_type) :: shape
       !> e_nm = sqrt((2n+1)(n^2-m^2)/(2n-1)), packed like the Legendre table (theta derivatives).
       real(wp), allocatable :: enm(:)
-      !> Sample grid (its tables also serve the fit of the outer surface).
+      !> Sample grid with the value tables (`plm`, `trig`) to the degree of the fit of the outer
+      !> surface; the derivative tables (`dplm`, `mplm`) are not built.
       type(sh_grid_type) :: grid
-      !> Surface points x(3, ntheta, nphi) at the grid directions.
-      real(wp), allocatable :: x(:, :, :)
-      !> Outward unit normals at the samples.
-      real(wp), allocatable :: n(:, :, :)
-      !> Radii at the samples.
+      !> Radii at the samples (the surface points and outward normals at the samples follow from
+      !> f and the grid: `node_geometry`, `column_geometry`).
       real(wp), allocatable :: r(:, :)
       !> r and its derivatives at the samples, f(:, i, j) as returned by `eval_surface`.
       real(wp), allocatable :: f(:, :, :)
-      !> Unit directions of the grid nodes, u(3, ntheta, nphi).
-      real(wp), allocatable :: u(:, :, :)
       !> Largest distance between grid-adjacent samples (diagonals included).
       real(wp) :: hmax = 0.0_wp
       !> Largest sampled radius.
@@ -64,8 +66,9 @@ contains
       integer, intent(in) :: ntheta
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
-      integer :: n, m, k, i, j, nt, np, jn
-      real(wp) :: rn, rm, h, st, ct, cp, sp, rh(3), th(3), ph(3), v(3)
+      real(wp), allocatable :: px(:, :), py(:, :), pz(:, :), nx(:), ny(:), nz(:), cap(:, :, :)
+      integer :: n, m, k, j, nt, np, c, c1
+      real(wp) :: rn, rm, h
 
       surf%shape = shape
       allocate (surf%enm(size(shape%table%ca)))
@@ -80,110 +83,325 @@ contains
       end do
       nt = ntheta
       np = 2 * ntheta
-      surf%grid = new_sh_grid(nt, np, max(lmax, shape%nmax, 2))
-      allocate (surf%x(3, nt, np), surf%n(3, nt, np), surf%r(nt, np), surf%f(6, nt, np), surf%u(3, nt, np))
-      ! r and its derivatives, then points and normals from the same syntheses (as `sh_grid_normals`;
-      ! surf%r holds (dr/dphi) / sin(theta) until the radii are set below)
-      call grid_derivatives(surf%grid, shape, surf%f, surf%r)
-      do j = 1, np
-         cp = cos(surf%grid%sphere%phi(j))
-         sp = sin(surf%grid%sphere%phi(j))
-         do i = 1, nt
-            st = surf%grid%sphere%sint(i)
-            ct = surf%grid%sphere%x(i)
-            rh = [st * cp, st * sp, ct]
-            th = [ct * cp, ct * sp, -st]
-            ph = [-sp, cp, 0.0_wp]
-            surf%x(:, i, j) = surf%f(1, i, j) * rh
-            v = surf%f(1, i, j) * rh - surf%f(2, i, j) * th - surf%r(i, j) * ph
-            surf%n(:, i, j) = v / norm2(v)
-         end do
-      end do
+      call new_value_grid(surf%grid, nt, np, max(lmax, shape%nmax, 2))
+      allocate (surf%r(nt, np), surf%f(6, nt, np))
+      call grid_derivatives(surf%grid, shape, surf%f)
+      ! radii and the largest distance between grid-adjacent samples (diagonals included), with
+      ! the points of the current, previous and first columns
+      allocate (px(nt, 3), py(nt, 3), pz(nt, 3), nx(nt), ny(nt), nz(nt), cap(3, 2, np))
       h = 0.0_wp
+      c = 1
       do j = 1, np
-         jn = 1 + mod(j, np)
-         do i = 1, nt
-            surf%r(i, j) = sqrt(dot_product(surf%x(:, i, j), surf%x(:, i, j)))
-            h = max(h, dist2(surf%x(:, i, j), surf%x(:, i, jn)))
-            if (i < nt) then
-               h = max(h, dist2(surf%x(:, i, j), surf%x(:, i + 1, j)), dist2(surf%x(:, i, j), surf%x(:, i + 1, jn)), &
-                       dist2(surf%x(:, i, jn), surf%x(:, i + 1, j)))
-            end if
-         end do
+         c = merge(1, 2 + mod(j, 2), j == 1)
+         call column_geometry(surf, j, px(:, c), py(:, c), pz(:, c), nx, ny, nz)
+         surf%r(:, j) = sqrt(px(:, c)**2 + py(:, c)**2 + pz(:, c)**2)
+         cap(:, 1, j) = [px(1, c), py(1, c), pz(1, c)]
+         cap(:, 2, j) = [px(nt, c), py(nt, c), pz(nt, c)]
+         if (j > 1) then
+            ! pairs of column j - 1 (buffer c1) and column j (buffer c)
+            c1 = merge(1, 2 + mod(j - 1, 2), j == 2)
+            call column_pairs(px(:, c1), py(:, c1), pz(:, c1), px(:, c), py(:, c), pz(:, c), h)
+         end if
       end do
+      ! the last column with the first
+      call column_pairs(px(:, c), py(:, c), pz(:, c), px(:, 1), py(:, 1), pz(:, 1), h)
       ! the polar caps: samples of the first and last rings are joined across the pole
       do j = 1, np / 2
-         h = max(h, dist2(surf%x(:, 1, j), surf%x(:, 1, j + np / 2)), dist2(surf%x(:, nt, j), surf%x(:, nt, j + np / 2)))
+         h = max(h, dist2(cap(:, 1, j), cap(:, 1, j + np / 2)), dist2(cap(:, 2, j), cap(:, 2, j + np / 2)))
       end do
       h = sqrt(h)
       surf%hmax = h
       surf%rmax = maxval(surf%r)
       surf%rmin = minval(surf%r)
-      do j = 1, np
+   contains
+      !> h = max(h, squared distances between grid-adjacent samples of columns a and b, b after a).
+      pure subroutine column_pairs(ax, ay, az, bx, by, bz, h)
+         real(wp), intent(in) :: ax(:), ay(:), az(:), bx(:), by(:), bz(:)
+         real(wp), intent(inout) :: h
+         integer :: i, nt
+         nt = size(ax)
          do i = 1, nt
-            surf%u(:, i, j) = surf%x(:, i, j) / surf%r(i, j)
+            h = max(h, (ax(i) - bx(i))**2 + (ay(i) - by(i))**2 + (az(i) - bz(i))**2)
          end do
-      end do
+         do i = 1, nt - 1
+            h = max(h, (ax(i) - ax(i + 1))**2 + (ay(i) - ay(i + 1))**2 + (az(i) - az(i + 1))**2, &
+                    (ax(i) - bx(i + 1))**2 + (ay(i) - by(i + 1))**2 + (az(i) - bz(i + 1))**2, &
+                    (bx(i) - ax(i + 1))**2 + (by(i) - ay(i + 1))**2 + (bz(i) - az(i + 1))**2)
+         end do
+      end subroutine column_pairs
    end subroutine new_shell_surface
 
+   !> Surface point and outward unit normal of sample (i, j) from r and its derivatives there:
+   !> x = r rhat, n ~ r rhat - r_theta thetahat - (r_phi / sin theta) phihat.
+   pure subroutine node_geometry(surf, i, j, x, n)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Node (ring, column).
+      integer, intent(in) :: i, j
+      !> Point and unit normal.
+      real(wp), intent(out) :: x(3), n(3)
+      call sample_geometry(surf%f(1, i, j), surf%f(2, i, j), surf%f(3, i, j), surf%grid%sphere%sint(i), &
+                           surf%grid%sphere%x(i), surf%grid%trig(2, j), surf%grid%trig(surf%grid%lmax + 2, j), &
+                           x(1), x(2), x(3), n(1), n(2), n(3))
+   end subroutine node_geometry
+
+   !> `node_geometry` for every sample of column j (components in separate arrays of the rings).
+   pure subroutine column_geometry(surf, j, px, py, pz, nx, ny, nz)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Column.
+      integer, intent(in) :: j
+      !> Points and unit normals of the samples of the column, (ntheta) each.
+      real(wp), intent(out) :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
+      real(wp) :: cp, sp
+      integer :: i
+      cp = surf%grid%trig(2, j)
+      sp = surf%grid%trig(surf%grid%lmax + 2, j)
+      do i = 1, surf%grid%sphere%ntheta
+         call sample_geometry(surf%f(1, i, j), surf%f(2, i, j), surf%f(3, i, j), surf%grid%sphere%sint(i), &
+                              surf%grid%sphere%x(i), cp, sp, px(i), py(i), pz(i), nx(i), ny(i), nz(i))
+      end do
+   end subroutine column_geometry
+
+   !> Point and outward unit normal from r, r_theta, r_phi and the direction's sines and cosines.
+   elemental subroutine sample_geometry(r, rt, rp, st, ct, cp, sp, x1, x2, x3, n1, n2, n3)
+      real(wp), intent(in) :: r, rt, rp, st, ct, cp, sp
+      real(wp), intent(out) :: x1, x2, x3, n1, n2, n3
+      real(wp) :: rps, vx, vy, vz, vn
+      rps = rp / st
+      x1 = r * (st * cp)
+      x2 = r * (st * sp)
+      x3 = r * ct
+      vx = x1 - rt * (ct * cp) + rps * sp
+      vy = x2 - rt * (ct * sp) - rps * cp
+      vz = x3 + rt * st
+      vn = 1.0_wp / sqrt(vx * vx + vy * vy + vz * vz)
+      n1 = vx * vn
+      n2 = vy * vn
+      n3 = vz * vn
+   end subroutine sample_geometry
+
+   !> Gauss grid of ntheta x nphi nodes with the Legendre values (`plm`) and trigonometric rows
+   !> (`trig`) to degree lmax, the tables `sh_synthesize` uses for values; the derivative tables
+   !> (`dplm`, `mplm`) are not built (the derivatives come from `grid_derivatives`).
+   pure subroutine new_value_grid(grid, ntheta, nphi, lmax)
+      type(sh_grid_type), intent(out) :: grid
+      integer, intent(in) :: ntheta, nphi, lmax
+      type(legendre_table_type) :: tab
+      real(wp), allocatable :: ph(:)
+      integer :: i, j, m, k
+
+      grid%sphere = new_sphere_grid(ntheta, nphi)
+      grid%lmax = lmax
+      tab = new_legendre_table(lmax)
+      ! (the packed layout of a degree-lmax table is the grid's)
+      allocate (grid%idx(0:lmax + 1))
+      k = 1
+      do m = 0, lmax
+         grid%idx(m) = k
+         k = k + lmax - m + 1
+      end do
+      grid%idx(lmax + 1) = k
+      allocate (grid%plm(packed_size(lmax), ntheta))
+      do i = 1, ntheta
+         call legendre_values(tab, grid%sphere%x(i), grid%plm(:, i), grid%sphere%sint(i))
+      end do
+      ! cos(m phi) and sin(m phi) a row at a time (the compiler vectorises the calls)
+      allocate (grid%trig(2 * lmax + 1, nphi), ph(nphi))
+      grid%trig(1, :) = 1.0_wp
+      do m = 1, lmax
+         do j = 1, nphi
+            ph(j) = m * grid%sphere%phi(j)
+         end do
+         do j = 1, nphi
+            grid%trig(m + 1, j) = cos(ph(j))
+            grid%trig(lmax + 1 + m, j) = sin(ph(j))
+         end do
+      end do
+   end subroutine new_value_grid
+
    !> r and its first and second angular derivatives at every node of `grid` (the layout of
-   !> `eval_surface`), by four syntheses: of r (with r_theta and r_phi / sin), of dr/dphi (with
-   !> its theta derivative), of d2r/dphi2 and of the Laplacian term sum n (n + 1) a_nm Y_nm; then
-   !> the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
-   pure subroutine grid_derivatives(grid, shape, f, r_phi_sin)
-      !> Grid with tables.
+   !> `eval_surface`): per ring and order m, eight Legendre sums over n (of a and b weighted by
+   !> 1, n, e_{n+1,m} (shifted) and n (n + 1)) give the m-th azimuthal coefficients of r, r_theta
+   !> (dPbar_nm/dtheta = (n cos Pbar_nm - e_nm Pbar_{n-1,m}) / sin), r_phi, r_thetaphi, r_phiphi and
+   !> the Laplacian term sum n (n + 1) a_nm Y_nm; one product with the trigonometric rows per
+   !> quantity; then the Legendre equation gives r_thetatheta = -cot r_theta - L r - r_phiphi / sin^2.
+   pure subroutine grid_derivatives(grid, shape, f)
+      !> Grid with value tables.
       type(sh_grid_type), intent(in) :: grid
       !> Expansion.
       type(sh_expansion_type), intent(in) :: shape
       !> f(:, i, j) = [r, r_t, r_p, r_tt, r_tp, r_pp] at node (i, j).
       real(wp), intent(out) :: f(:, :, :)
-      !> (dr/dphi) / sin(theta) at the nodes (for the normals).
-      real(wp), intent(out) :: r_phi_sin(:, :)
-      type(sh_expansion_type) :: dphi, dphi2, lap
-      real(wp), allocatable :: a(:, :), b(:, :), w1(:, :), w2(:, :), w3(:, :)
-      integer :: n, m, nmax, nt, np, i
-      real(wp) :: st, ct
+      real(wp), allocatable :: c(:, :), sums(:, :), g(:, :, :), w(:, :), lap(:, :)
+      integer :: n, m, l, nt, np, i, j, k0, q
+      real(wp) :: rn, rm, st, ct, at, bt, en
 
-      nmax = min(shape%nmax, grid%lmax)
+      l = min(shape%nmax, grid%lmax)
       nt = grid%sphere%ntheta
       np = grid%sphere%nphi
-      allocate (a(0:nmax, 0:nmax), b(0:nmax, 0:nmax), w1(nt, np), w2(nt, np), w3(nt, np))
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = m * shape%b(n, m)
-            b(n, m) = -m * shape%a(n, m)
+      allocate (c(8, 0:l), sums(8, nt), g(nt, 2 * l + 1, 6), w(nt, np), lap(nt, np))
+      g = 0.0_wp
+      do m = 0, l
+         rm = real(m, wp)
+         k0 = grid%idx(m)
+         c = 0.0_wp
+         do n = m, l
+            rn = real(n, wp)
+            c(1, n) = shape%a(n, m)
+            c(2, n) = shape%b(n, m)
+            c(3, n) = rn * shape%a(n, m)
+            c(4, n) = rn * shape%b(n, m)
+            if (n < l) then
+               ! e_{n+1,m} = sqrt((2n+3)((n+1)^2 - m^2)/(2n+1))
+               en = sqrt((2.0_wp * rn + 3.0_wp) * ((rn + 1.0_wp)**2 - rm * rm) / (2.0_wp * rn + 1.0_wp))
+               c(5, n) = en * shape%a(n + 1, m)
+               c(6, n) = en * shape%b(n + 1, m)
+            end if
+            c(7, n) = rn * (rn + 1.0_wp) * shape%a(n, m)
+            c(8, n) = rn * (rn + 1.0_wp) * shape%b(n, m)
+         end do
+         do i = 1, nt
+            sums(:, i) = 0.0_wp
+            do n = m, l
+               sums(:, i) = sums(:, i) + c(:, n) * grid%plm(k0 + n - m, i)
+            end do
+         end do
+         do i = 1, nt
+            st = grid%sphere%sint(i)
+            ct = grid%sphere%x(i)
+            at = (ct * sums(3, i) - sums(5, i)) / st
+            bt = (ct * sums(4, i) - sums(6, i)) / st
+            g(i, m + 1, 1) = sums(1, i)
+            g(i, m + 1, 2) = at
+            g(i, m + 1, 3) = rm * sums(2, i)
+            g(i, m + 1, 4) = sums(7, i)
+            g(i, m + 1, 5) = rm * bt
+            g(i, m + 1, 6) = -rm * rm * sums(1, i)
+            if (m > 0) then
+               g(i, l + 1 + m, 1) = sums(2, i)
+               g(i, l + 1 + m, 2) = bt
+               g(i, l + 1 + m, 3) = -rm * sums(1, i)
+               g(i, l + 1 + m, 4) = sums(8, i)
+               g(i, l + 1 + m, 5) = -rm * at
+               g(i, l + 1 + m, 6) = -rm * rm * sums(2, i)
+            end if
          end do
       end do
-      call new_sh_expansion_real(dphi, a, b)
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = -real(m * m, wp) * shape%a(n, m)
-            b(n, m) = -real(m * m, wp) * shape%b(n, m)
+      do q = 1, 6
+         if (q == 4) then
+            call azimuthal_sum(grid, g(:, :, q), l, lap)
+            cycle
+         end if
+         call azimuthal_sum(grid, g(:, :, q), l, w)
+         do j = 1, np
+            do i = 1, nt
+               f(q, i, j) = w(i, j)
+            end do
          end do
       end do
-      call new_sh_expansion_real(dphi2, a, b)
-      do m = 0, nmax
-         do n = m, nmax
-            a(n, m) = real(n * (n + 1), wp) * shape%a(n, m)
-            b(n, m) = real(n * (n + 1), wp) * shape%b(n, m)
+      do j = 1, np
+         do i = 1, nt
+            st = grid%sphere%sint(i)
+            ct = grid%sphere%x(i)
+            f(4, i, j) = -ct / st * f(2, i, j) - lap(i, j) - f(6, i, j) / (st * st)
          end do
-      end do
-      call new_sh_expansion_real(lap, a, b)
-      call sh_synthesize(grid, shape, w1, w2, r_phi_sin, nused=nmax)
-      f(1, :, :) = w1
-      f(2, :, :) = w2
-      call sh_synthesize(grid, dphi, w1, w2, nused=nmax)
-      f(3, :, :) = w1
-      f(5, :, :) = w2
-      call sh_synthesize(grid, dphi2, w1, nused=nmax)
-      f(6, :, :) = w1
-      call sh_synthesize(grid, lap, w3, nused=nmax)
-      do i = 1, nt
-         st = grid%sphere%sint(i)
-         ct = grid%sphere%x(i)
-         f(4, i, :) = -ct / st * f(2, i, :) - w3(i, :) - f(6, i, :) / (st * st)
       end do
    end subroutine grid_derivatives
+
+   !> out(i, j) = sum_m g(i, m + 1) cos(m phi_j) + sum_{m >= 1} g(i, l + 1 + m) sin(m phi_j), m <= l
+   !> (the azimuthal stage of a synthesis; a column at a time, the grid's trigonometric rows).
+   pure subroutine azimuthal_sum(grid, g, l, out)
+      !> Grid with trigonometric rows to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Per ring the cosine (columns 1..l + 1) and sine (l + 2..2 l + 1) coefficients.
+      real(wp), intent(in) :: g(:, :)
+      !> Highest order.
+      integer, intent(in) :: l
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(out) :: out(:, :)
+      integer :: j, m, lm
+
+      lm = grid%lmax
+      do j = 1, size(out, 2)
+         out(:, j) = g(:, 1)
+         do m = 1, l
+            out(:, j) = out(:, j) + g(:, m + 1) * grid%trig(m + 1, j) + g(:, l + 1 + m) * grid%trig(lm + 1 + m, j)
+         end do
+      end do
+   end subroutine azimuthal_sum
+
+   !> Values on the grid of sum over n <= l of (a_nm cos m phi + b_nm sin m phi) Pbar_nm(cos theta)
+   !> (b(:, 0) is not used): per ring and order the Legendre sums, then `azimuthal_sum`.
+   pure subroutine grid_synthesis(grid, a, b, l, out)
+      !> Grid with value tables to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Cosine and sine coefficients, (0:>=l, 0:>=l).
+      real(wp), intent(in) :: a(0:, 0:), b(0:, 0:)
+      !> Highest degree.
+      integer, intent(in) :: l
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(out) :: out(:, :)
+      real(wp), allocatable :: g(:, :)
+      real(wp) :: sa, sb
+      integer :: i, m, n, k0
+
+      allocate (g(grid%sphere%ntheta, 2 * l + 1))
+      do m = 0, l
+         k0 = grid%idx(m)
+         do i = 1, grid%sphere%ntheta
+            sa = 0.0_wp
+            sb = 0.0_wp
+            do n = m, l
+               sa = sa + a(n, m) * grid%plm(k0 + n - m, i)
+               sb = sb + b(n, m) * grid%plm(k0 + n - m, i)
+            end do
+            g(i, m + 1) = sa
+            if (m > 0) g(i, l + 1 + m) = sb
+         end do
+      end do
+      call azimuthal_sum(grid, g, l, out)
+   end subroutine grid_synthesis
+
+   !> Real SH coefficients of degree <= l of grid values f by Gauss quadrature (the inverse of
+   !> `grid_synthesis` for band-limited f): per ring the azimuthal sums (a column of f at a time),
+   !> then per order the Legendre sums.
+   pure subroutine grid_analysis(grid, f, l, a, b)
+      !> Grid with value tables to degree >= l.
+      type(sh_grid_type), intent(in) :: grid
+      !> Values at the nodes, (ntheta, nphi).
+      real(wp), intent(in) :: f(:, :)
+      !> Highest degree.
+      integer, intent(in) :: l
+      !> Cosine and sine coefficients (0:l, 0:l), zero outside n >= m (and b(:, 0)).
+      real(wp), intent(out) :: a(0:, 0:), b(0:, 0:)
+      real(wp), allocatable :: fc(:, :), fs(:, :)
+      real(wp) :: wf
+      integer :: i, j, m, k0, lm, nt
+
+      lm = grid%lmax
+      nt = grid%sphere%ntheta
+      allocate (fc(nt, 0:l), fs(nt, 0:l))
+      fc = 0.0_wp
+      fs = 0.0_wp
+      do j = 1, size(f, 2)
+         fc(:, 0) = fc(:, 0) + f(:, j)
+         do m = 1, l
+            fc(:, m) = fc(:, m) + f(:, j) * grid%trig(m + 1, j)
+            fs(:, m) = fs(:, m) + f(:, j) * grid%trig(lm + 1 + m, j)
+         end do
+      end do
+      a = 0.0_wp
+      b = 0.0_wp
+      do m = 0, l
+         k0 = grid%idx(m)
+         wf = merge(1.0_wp, 2.0_wp, m == 0)
+         do i = 1, nt
+            a(m:l, m) = a(m:l, m) + (wf * grid%sphere%weight(i) * fc(i, m)) * grid%plm(k0:k0 + l - m, i)
+            if (m > 0) b(m:l, m) = b(m:l, m) + (wf * grid%sphere%weight(i) * fs(i, m)) * grid%plm(k0:k0 + l - m, i)
+         end do
+      end do
+   end subroutine grid_analysis
 
    !> Squared distance between two points.
    pure function dist2(a, b) result(d)
@@ -273,11 +491,11 @@ contains
       type(shell_surface_type), intent(in) :: surf
       !> Polar angles and azimuths (|sin(theta)| not tiny).
       real(wp), intent(in) :: theta(:), phi(:)
-      !> f(:, k) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
+      !> f(k, :) = r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2 at point k.
       real(wp), intent(out) :: f(:, :)
-      !> sc(:, k) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
+      !> sc(k, :) = sin(theta), cos(theta), sin(phi), cos(phi) at point k (for `surface_frame_trig`).
       real(wp), intent(out), optional :: sc(:, :)
-      real(wp) :: th(lanes), ph(lanes), fl(6, lanes), scl(4, lanes)
+      real(wp) :: th(lanes), ph(lanes), fl(lanes, 6), scl(lanes, 4)
       integer :: k0, nk
 
       do k0 = 1, size(theta), lanes
@@ -288,19 +506,20 @@ contains
          th(1:nk) = theta(k0:k0 + nk - 1)
          ph(1:nk) = phi(k0:k0 + nk - 1)
          call eval_lanes(surf, th, ph, fl, scl)
-         f(:, k0:k0 + nk - 1) = fl(:, 1:nk)
-         if (present(sc)) sc(:, k0:k0 + nk - 1) = scl(:, 1:nk)
+         f(k0:k0 + nk - 1, :) = fl(1:nk, :)
+         if (present(sc)) sc(k0:k0 + nk - 1, :) = scl(1:nk, :)
       end do
    end subroutine eval_surface_many
 
-   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`).
+   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`); the azimuthal factors
+   !> are summed once per order and r_thetatheta follows from the Legendre equation at the end.
    pure subroutine eval_lanes(surf, theta, phi, f, sc)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: theta(lanes), phi(lanes)
-      real(wp), intent(out) :: f(6, lanes), sc(4, lanes)
+      real(wp), intent(out) :: f(lanes, 6), sc(lanes, 4)
       real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
       real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
-                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, q
+                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, t0
       real(wp) :: an, bn, ca, cb, en, rn, nn1, msq, rm
       integer :: m, n, k0, nmax
 
@@ -308,10 +527,10 @@ contains
       s = sin(theta)
       cp = cos(phi)
       sp = sin(phi)
-      sc(1, :) = s
-      sc(2, :) = x
-      sc(3, :) = sp
-      sc(4, :) = cp
+      sc(:, 1) = s
+      sc(:, 2) = x
+      sc(:, 3) = sp
+      sc(:, 4) = cp
       inv_s = 1.0_wp / s
       cots = x * inv_s
       nmax = surf%shape%nmax
@@ -366,20 +585,22 @@ contains
          end do
          rm = real(m, wp)
          msq = rm * rm
-         q = msq * inv_s * inv_s
-         f1 = f1 + a0 * cm + b0 * sm
-         f2 = f2 + a1 * cm + b1 * sm
+         ! the azimuthal factors (r_thetatheta from the Legendre equation at the end)
+         t0 = a0 * cm + b0 * sm
+         f1 = f1 + t0
+         f6 = f6 - msq * t0
+         f2 = f2 + (a1 * cm + b1 * sm)
          f3 = f3 + rm * (b0 * cm - a0 * sm)
-         f4 = f4 + (-cots * a1 - ann + q * a0) * cm + (-cots * b1 - bnn + q * b0) * sm
          f5 = f5 + rm * (b1 * cm - a1 * sm)
-         f6 = f6 - msq * (a0 * cm + b0 * sm)
+         f4 = f4 + (ann * cm + bnn * sm)
       end do
-      f(1, :) = f1
-      f(2, :) = f2
-      f(3, :) = f3
-      f(4, :) = f4
-      f(5, :) = f5
-      f(6, :) = f6
+      ! Legendre equation: r_thetatheta = -cot r_theta - sum n (n + 1) r_nm - r_phiphi / sin^2
+      f(:, 1) = f1
+      f(:, 2) = f2
+      f(:, 3) = f3
+      f(:, 4) = -cots * f2 - f4 - f6 * (inv_s * inv_s)
+      f(:, 5) = f5
+      f(:, 6) = f6
    end subroutine eval_lanes
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:
@@ -510,7 +731,7 @@ contains
       real(wp), intent(in), optional :: known(3)
       real(wp), allocatable :: w(:, :)
       integer, allocatable :: jidx(:)
-      real(wp) :: ry, ty, py, reach, alpha, dphi, dth, width, dmin, th, ph, dloc, wc
+      real(wp) :: ry, ty, py, reach, alpha, dphi, dth, width, dmin, th, ph, dloc, wc, xs(3), ns(3)
       integer :: nt, np, i0, i1, ncol, i, jj, j, a, b, ia, jb, j0
       logical :: all_phi, is_min
 
@@ -558,7 +779,8 @@ contains
          jidx(jj) = 1 + modulo(j0 - 1 + jj - 1, np)
          j = jidx(jj)
          do i = i0, i1
-            w(i, jj) = norm2(y - surf%x(:, i, j))
+            call node_geometry(surf, i, j, xs, ns)
+            w(i, jj) = norm2(y - xs)
          end do
       end do
       dmin = huge(1.0_wp)
@@ -584,7 +806,8 @@ contains
             th = surf%grid%sphere%theta(i)
             ph = surf%grid%sphere%phi(jidx(jj))
             if (present(known)) then
-               if (norm2(surf%x(:, i, jidx(jj)) - known) < 1.5_wp * surf%hmax) then
+               call node_geometry(surf, i, jidx(jj), xs, ns)
+               if (norm2(xs - known) < 1.5_wp * surf%hmax) then
                   if (wc < dmin) then
                      dmin = wc
                      theta_c = th

@@ -22,6 +22,15 @@
 !> disc the body-frame point y = R^T (x - c) / s is updated incrementally and tested against the
 !> certified bounds first; r(y / |y|) is evaluated only between r_min and r_max.
 !>
+!> Stacks (`anm_slicing_stack`). All planes of a call are culled before any is labelled. A
+!> shelled particle's layer surfaces share its body frame, so the layers the bounds leave open
+!> are evaluated together (one Legendre recursion for all of them). A particle (shelled or not)
+!> whose candidate pixel rectangles over the call's planes hold more than `table_work_factor`
+!> times the nodes of a direction table gets one: certified per-direction-cell bounds of its own
+!> radius and of every layer's, so pixels away from the surfaces are labelled without any
+!> evaluation (the table's cells are sized for an interpolation error of about one pixel). The
+!> labels are those of the plain rules: the table only skips evaluations whose outcome it proves.
+!>
 !> Usage:
 !>     call slice_labels(planes, forms, form, shell_form, center, rotation, scale, box, .true., &
 !>        & particle, layer, owner, stats, error)
@@ -33,10 +42,13 @@ module anm_slicing_kernel
    use anm_parking_cell_list, only: cell_list_type, new_cell_list
    use anm_slicing_plane, only: slice_plane_type
    use anm_slicing_form, only: slice_form_type
+   use anm_slicing_stack, only: slice_stack_type, new_slice_stack, stack_radii, stack_table_bounds, &
+      & build_stack_table, curvature_bound, table_nodes
+   use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
    implicit none
    private
 
-   public :: slice_labels, slice_stats_type, rows_per_block, max_tiles
+   public :: slice_labels, slice_stats_type, rows_per_block, max_tiles, table_work_factor
 
    !> Pixel rows per unit of parallel work.
    integer, parameter :: rows_per_block = 4
@@ -44,6 +56,9 @@ module anm_slicing_kernel
    integer, parameter :: max_tiles = 64
    !> Largest periodic image index handled per axis (images farther away are never needed).
    integer, parameter :: max_image = 8
+   !> A stack gets a direction table when its candidates' pixel rectangles over all planes of a
+   !> call hold more than this many times the table's nodes (each node costs about one pixel).
+   real(wp), parameter :: table_work_factor = 2.0_wp
 
    !> Work done by a call (for benchmarks and docs).
    type :: slice_stats_type
@@ -67,6 +82,12 @@ module anm_slicing_kernel
       real(wp) :: b0(3) = 0.0_wp, bu(3) = 0.0_wp, bv(3) = 0.0_wp
    end type candidate_type
 
+   !> The candidates of one plane.
+   type :: plane_candidates_type
+      type(candidate_type), allocatable :: list(:)
+      integer :: n = 0
+   end type plane_candidates_type
+
 contains
 
    !> Label the pixels of every plane (all planes must have the same pixel counts).
@@ -79,7 +100,8 @@ contains
       !> Per particle: index of its own form in `forms`.
       integer, intent(in) :: form(:)
       !> Per particle and layer: index of the layer's outer surface in `forms`, 0 for no shell;
-      !> (nlayer, np), nlayer may be 0. Layers must be nested (layer k inside layer k + 1).
+      !> (nlayer, np), nlayer may be 0. Layer k is meant to lie inside layer k + 1; where fitted
+      !> surfaces cross, a point gets the first layer whose surface contains it.
       integer, intent(in) :: shell_form(:, :)
       !> Per particle: centre (3, np), mm, inside the box.
       real(wp), intent(in) :: center(:, :)
@@ -102,8 +124,11 @@ contains
       !> Error naming the inconsistent argument.
       type(error_type), allocatable, intent(out) :: error
       type(cell_list_type) :: cl
+      type(plane_candidates_type), allocatable :: cands(:)
+      type(slice_stack_type), allocatable :: stacks(:)
       real(wp), allocatable :: rho(:)
-      integer, allocatable :: outer(:)
+      real(wp) :: rmed
+      integer, allocatable :: outer(:), stack_of(:)
       integer :: np, nl, j, k, ip
 
       np = size(form)
@@ -114,27 +139,149 @@ contains
       layer = 0
       owner = 0
       if (np == 0) return
-      ! bounding radius and outermost surface of each particle
+      ! bounding radius (over the particle and all its layers) and outermost surface of each particle
       allocate (rho(np), outer(np))
       do j = 1, np
          outer(j) = form(j)
+         rho(j) = forms(form(j))%r_max
          do k = nl, 1, -1
             if (shell_form(k, j) > 0) then
-               outer(j) = shell_form(k, j)
-               exit
+               if (outer(j) == form(j)) outer(j) = shell_form(k, j)
+               rho(j) = max(rho(j), forms(shell_form(k, j))%r_max)
             end if
          end do
-         rho(j) = scale(j) * max(forms(form(j))%r_max, forms(outer(j))%r_max)
+         rho(j) = scale(j) * rho(j)
       end do
       call new_cell_list(cl, box, periodic, minval(rho), capacity=np)
       do j = 1, np
          call cl%insert(j, center(:, j), rho(j))
       end do
+      allocate (cands(size(planes)))
+      rmed = median(rho)
       do ip = 1, size(planes)
-         call label_plane(planes(ip), forms, form, shell_form, outer, center, rotation, scale, rho, cl, &
+         call cull(planes(ip), forms, outer, center, rotation, scale, rho, rmed, cl, cands(ip)%list, cands(ip)%n, stats)
+         stats%candidates = stats%candidates + cands(ip)%n
+      end do
+      call make_stacks(planes, cands, forms, form, shell_form, scale, stacks, stack_of)
+      do ip = 1, size(planes)
+         call label_plane(planes(ip), cands(ip)%list, cands(ip)%n, forms, form, shell_form, stacks, stack_of, &
                           particle(:, :, ip), layer(:, :, ip), owner(:, :, ip), stats)
       end do
    end subroutine slice_labels
+
+   !> Stacks (anm_slicing_stack) of the particles met by the planes: one per distinct (particle
+   !> form, layer forms). A shelled particle always gets one (its layers are evaluated together);
+   !> a direction table is built where the candidates' pixel rectangles over all planes hold more
+   !> than table_work_factor times the table's nodes, and a particle without shells gets a stack
+   !> only then (a large particle: most of its pixels are decided by the table).
+   subroutine make_stacks(planes, cands, forms, form, shell_form, scale, stacks, stack_of)
+      type(slice_plane_type), intent(in) :: planes(:)
+      type(plane_candidates_type), intent(in) :: cands(:)
+      type(slice_form_type), intent(in) :: forms(:)
+      integer, intent(in) :: form(:), shell_form(:, :)
+      real(wp), intent(in) :: scale(:)
+      type(slice_stack_type), allocatable, intent(out) :: stacks(:)
+      integer, allocatable, intent(out) :: stack_of(:)
+      integer, allocatable :: rep(:), head(:), chain(:), keep(:), ntab(:)
+      real(wp), allocatable :: work(:), smax(:)
+      type(sh_expansion_type), allocatable :: layers(:)
+      type(sh_expansion_type) :: zero
+      real(wp) :: h
+      integer :: nl, ns, ip, ic, id, s, key, k, nt, nkeep
+      logical :: shelled
+
+      nl = size(shell_form, 1)
+      allocate (stack_of(size(form)), head(2 * size(forms)), rep(16), chain(16), work(16), smax(16))
+      stack_of = 0
+      head = 0
+      ns = 0
+      ! group the candidates by key: the largest layer form (shelled) or size(forms) + form (not)
+      do ip = 1, size(cands)
+         do ic = 1, cands(ip)%n
+            id = cands(ip)%list(ic)%id
+            if (stack_of(id) == 0) then
+               key = 0
+               if (nl > 0) key = maxval(shell_form(:, id))
+               if (key == 0) key = size(forms) + form(id)
+               s = head(key)
+               do while (s > 0)
+                  if (form(rep(s)) == form(id)) then
+                     if (nl == 0) exit
+                     if (all(shell_form(:, rep(s)) == shell_form(:, id))) exit
+                  end if
+                  s = chain(s)
+               end do
+               if (s == 0) then
+                  if (ns == size(rep)) then
+                     rep = [rep, rep]
+                     chain = [chain, chain]
+                     work = [work, work]
+                     smax = [smax, smax]
+                  end if
+                  ns = ns + 1
+                  s = ns
+                  rep(s) = id
+                  chain(s) = head(key)
+                  head(key) = s
+                  work(s) = 0.0_wp
+                  smax(s) = 0.0_wp
+               end if
+               stack_of(id) = s
+               smax(s) = max(smax(s), scale(id))
+            end if
+            s = stack_of(id)
+            work(s) = work(s) + real(cands(ip)%list(ic)%row_hi - cands(ip)%list(ic)%row_lo + 1, wp) * &
+                      real(cands(ip)%list(ic)%col_hi - cands(ip)%list(ic)%col_lo + 1, wp)
+         end do
+      end do
+      ! keep the shelled stacks and those worth a table; renumber
+      allocate (keep(ns), ntab(ns), layers(nl))
+      call new_sh_expansion_real(zero, reshape([0.0_wp], [1, 1]), reshape([0.0_wp], [1, 1]))
+      nkeep = 0
+      keep = 0
+      do s = 1, ns
+         id = rep(s)
+         shelled = .false.
+         if (nl > 0) shelled = any(shell_form(:, id) > 0)
+         h = curvature_bound(forms(form(id))%shape)
+         do k = 1, nl
+            if (shell_form(k, id) > 0) h = max(h, curvature_bound(forms(shell_form(k, id))%shape))
+         end do
+         ! table intervals for an interpolation error of about one pixel (shape units)
+         nt = table_nodes(h, planes(1)%pixel / smax(s))
+         ntab(s) = 0
+         if (work(s) > table_work_factor * (nt + 1) * (2 * nt + 1)) ntab(s) = nt
+         if (shelled .or. ntab(s) > 0) then
+            nkeep = nkeep + 1
+            keep(s) = nkeep
+         end if
+      end do
+      allocate (stacks(nkeep))
+      do s = 1, ns
+         if (keep(s) == 0) cycle
+         id = rep(s)
+         do k = 1, nl
+            if (shell_form(k, id) > 0) then
+               layers(k) = forms(shell_form(k, id))%shape
+            else
+               layers(k) = zero
+            end if
+         end do
+         shelled = .false.
+         if (nl > 0) shelled = any(shell_form(:, id) > 0)
+         if (shelled) then
+            call new_slice_stack(stacks(keep(s)), layers)
+         else
+            call new_slice_stack(stacks(keep(s)), layers(1:0))
+         end if
+         associate (st => stacks(keep(s)))
+            if (ntab(s) > 0) call build_stack_table(st, forms(form(id))%shape, layers(1:st%nform), ntab(s))
+         end associate
+      end do
+      do id = 1, size(form)
+         if (stack_of(id) > 0) stack_of(id) = keep(stack_of(id))
+      end do
+   end subroutine make_stacks
 
    subroutine check_arguments(planes, forms, form, shell_form, center, rotation, scale, box, particle, layer, owner, error)
       type(slice_plane_type), intent(in) :: planes(:)
@@ -187,23 +334,21 @@ contains
       end do
    end subroutine check_arguments
 
-   !> Cull and label one plane.
-   subroutine label_plane(plane, forms, form, shell_form, outer, center, rotation, scale, rho, cl, &
-                          particle, layer, owner, stats)
+   !> Label one plane from its candidates.
+   subroutine label_plane(plane, cands, nc, forms, form, shell_form, stacks, stack_of, particle, layer, owner, stats)
       type(slice_plane_type), intent(in) :: plane
+      type(candidate_type), intent(in) :: cands(:)
+      integer, intent(in) :: nc
       type(slice_form_type), intent(in) :: forms(:)
-      integer, intent(in) :: form(:), shell_form(:, :), outer(:)
-      real(wp), intent(in) :: center(:, :), rotation(:, :, :), scale(:), rho(:)
-      type(cell_list_type), intent(in) :: cl
+      integer, intent(in) :: form(:), shell_form(:, :)
+      type(slice_stack_type), intent(in) :: stacks(:)
+      integer, intent(in) :: stack_of(:)
       integer, intent(inout) :: particle(:, :), layer(:, :), owner(:, :)
       type(slice_stats_type), intent(inout) :: stats
-      type(candidate_type), allocatable :: cands(:)
       integer, allocatable :: first(:), members(:), fill(:)
-      integer :: nc, nblock, ib, ic, k
+      integer :: nblock, ib, ic, k
       integer(i8) :: tests, evals
 
-      call cull(plane, forms, outer, center, rotation, scale, rho, cl, cands, nc, stats)
-      stats%candidates = stats%candidates + nc
       ! bin candidates by row blocks (CSR), keeping culling order inside each block
       nblock = (plane%nv + rows_per_block - 1) / rows_per_block
       allocate (first(nblock + 1), fill(nblock))
@@ -228,13 +373,20 @@ contains
       tests = 0
       evals = 0
       !$omp parallel do default(none) schedule(dynamic, 1) private(ib, k) &
-      !$omp shared(nblock, first, members, cands, plane, forms, form, shell_form, particle, layer, owner) &
-      !$omp reduction(+:tests, evals)
+      !$omp shared(nblock, first, members, cands, plane, forms, form, shell_form, stacks, stack_of, particle, layer, &
+      !$omp owner) reduction(+:tests, evals)
       do ib = 1, nblock
          do k = first(ib), first(ib + 1) - 1
-            call label_block(cands(members(k)), (ib - 1) * rows_per_block + 1, &
-                             min(plane%nv, ib * rows_per_block), plane, forms, form, shell_form, &
-                             particle, layer, owner, tests, evals)
+            associate (cd => cands(members(k)))
+               if (stack_of(cd%id) > 0) then
+                  call label_block_stack(cd, (ib - 1) * rows_per_block + 1, min(plane%nv, ib * rows_per_block), &
+                                         forms, form, shell_form, stacks(stack_of(cd%id)), particle, layer, owner, &
+                                         tests, evals)
+               else
+                  call label_block(cd, (ib - 1) * rows_per_block + 1, min(plane%nv, ib * rows_per_block), forms, &
+                                   form, shell_form, particle, layer, owner, tests, evals)
+               end if
+            end associate
          end do
       end do
       !$omp end parallel do
@@ -243,7 +395,7 @@ contains
    end subroutine label_plane
 
    !> Candidates of one plane, in a deterministic order (tile by tile, cell-list order inside).
-   subroutine cull(plane, forms, outer, center, rotation, scale, rho, cl, cands, nc, stats)
+   subroutine cull(plane, forms, outer, center, rotation, scale, rho, rmed, cl, cands, nc, stats)
       type(slice_plane_type), intent(in) :: plane
       type(slice_form_type), intent(in) :: forms(:)
       integer, intent(in) :: outer(:)
@@ -256,13 +408,13 @@ contains
       real(wp), allocatable :: shift(:, :)
       type(candidate_type), allocatable :: tmp(:)
       type(candidate_type) :: cd
-      real(wp) :: width, height, h, tile_center(3), rmed
+      real(wp), intent(in) :: rmed
+      real(wp) :: width, height, h, tile_center(3)
       integer :: ntu, ntv, tu, tv, nq, q, code, nextra, e
       logical :: dup, keep
 
       width = plane%nu * plane%pixel
       height = plane%nv * plane%pixel
-      rmed = median(rho)
       h = max(width, height) / min(max_tiles, max(1, ceiling(max(width, height) / (2.0_wp * rmed))))
       h = max(h, plane%pixel)
       ntu = max(1, ceiling(width / h))
@@ -360,10 +512,9 @@ contains
    end subroutine make_candidate
 
    !> Label the pixels of rows [r0, r1] covered by one candidate.
-   pure subroutine label_block(cd, r0, r1, plane, forms, form, shell_form, particle, layer, owner, tests, evals)
+   pure subroutine label_block(cd, r0, r1, forms, form, shell_form, particle, layer, owner, tests, evals)
       type(candidate_type), intent(in) :: cd
       integer, intent(in) :: r0, r1
-      type(slice_plane_type), intent(in) :: plane
       type(slice_form_type), intent(in) :: forms(:)
       integer, intent(in) :: form(:), shell_form(:, :)
       integer, intent(inout) :: particle(:, :), layer(:, :), owner(:, :)
@@ -407,6 +558,90 @@ contains
          end do
       end do
    end subroutine label_block
+
+   !> label_block for a particle with a stack of layers: the same rules, with the direction table
+   !> deciding points far from the surfaces and the undecided layers evaluated together.
+   pure subroutine label_block_stack(cd, r0, r1, forms, form, shell_form, stack, particle, layer, owner, tests, evals)
+      type(candidate_type), intent(in) :: cd
+      integer, intent(in) :: r0, r1
+      type(slice_form_type), intent(in) :: forms(:)
+      integer, intent(in) :: form(:), shell_form(:, :)
+      type(slice_stack_type), intent(in) :: stack
+      integer, intent(inout) :: particle(:, :), layer(:, :), owner(:, :)
+      integer(i8), intent(inout) :: tests, evals
+      integer :: row, col, c0, c1, k, best, nl, fp, fk, limit, hit, nundecided
+      real(wp) :: dv, w, y(3), yrow(3), q2, q, lo, hp, hi, r(stack%npad)
+      logical :: isin, decided
+
+      nl = size(shell_form, 1)
+      fp = form(cd%id)
+      do row = max(r0, cd%row_lo), min(r1, cd%row_hi)
+         dv = (row - 0.5_wp) - cd%pv
+         if (dv**2 > cd%a2) cycle
+         w = sqrt(cd%a2 - dv**2)
+         c0 = max(cd%col_lo, ceiling(cd%pu - w + 0.5_wp))
+         c1 = min(cd%col_hi, floor(cd%pu + w + 0.5_wp))
+         yrow = cd%b0 + (row - 0.5_wp) * cd%bv
+         do col = c0, c1
+            if (particle(col, row) /= 0) cycle
+            y = yrow + (col - 0.5_wp) * cd%bu
+            tests = tests + 1
+            q2 = y(1)**2 + y(2)**2 + y(3)**2
+            decided = .false.
+            if (stack%ntheta > 0 .and. q2 > forms(fp)%r_min**2) then
+               q = sqrt(q2)
+               call stack_table_bounds(stack, y, lo, hp, hi)
+               if (q > hi) cycle                     ! outside the particle and every layer
+               isin = q <= lo                        ! inside the particle
+               decided = isin .or. q > hp            ! or certainly outside it
+            end if
+            if (.not. decided) call point_test(forms(fp), y, evals, isin)
+            if (isin) then
+               particle(col, row) = cd%id
+               layer(col, row) = 0
+               owner(col, row) = 0
+               cycle
+            end if
+            best = layer(col, row)
+            if (best == 0) best = nl + 1
+            ! the first layer certainly containing the point bounds the search; layers before it
+            ! that the certified bounds leave open are evaluated together
+            limit = best - 1
+            nundecided = 0
+            do k = 1, best - 1
+               fk = shell_form(k, cd%id)
+               if (fk == 0) cycle
+               if (q2 <= forms(fk)%r_min**2) then
+                  limit = k
+                  exit
+               end if
+               if (q2 <= forms(fk)%r_max**2) nundecided = nundecided + 1
+            end do
+            if (nundecided > 0) then
+               call stack_radii(stack, y, r)
+               evals = evals + nundecided
+            end if
+            hit = 0
+            do k = 1, limit
+               fk = shell_form(k, cd%id)
+               if (fk == 0) cycle
+               if (q2 <= forms(fk)%r_min**2) then
+                  hit = k
+                  exit
+               end if
+               if (q2 > forms(fk)%r_max**2) cycle
+               if (sqrt(q2) <= r(k)) then
+                  hit = k
+                  exit
+               end if
+            end do
+            if (hit > 0) then
+               layer(col, row) = hit
+               owner(col, row) = cd%id
+            end if
+         end do
+      end do
+   end subroutine label_block_stack
 
    !> Point-in-surface test with the certified bounds first (counts SH evaluations).
    pure subroutine point_test(f, y, evals, isin)

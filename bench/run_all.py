@@ -1,0 +1,453 @@
+"""The benchmark suite: runs every benchmark and rewrites docs/performance.md.
+
+Benchmarks print figures; they are not timed tests. This program runs them one after the other
+(never two at once), times the parking jobs with GNU time (wall time and peak memory), checks every
+parked model with `anm verify`, runs the reference RSA loop of ../shared/bench side by side with
+Anm, and writes the figures, the exact commands and the machine (core count, CPU, load average)
+into docs/performance.md. The analysis of the figures stays in docs/performance-notes.md.
+
+Usage (from the repository root; `bash scripts/benchmarks.sh` installs and builds first):
+
+    python3 bench/run_all.py [--out docs/performance.md] [--skip NAME ...] [--only NAME ...]
+
+NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing.
+Jobs that need ../shared/shapes (msand, table23, million with real shapes, slicing of M_sand)
+are reported as "not run" when the folder is missing.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import re
+import shlex
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SHARED = ROOT.parent / "shared"
+SHAPES = SHARED / "shapes"
+ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing")
+
+
+@dataclass
+class Run:
+    """One timed command: its output, wall time (s) and peak memory (MB)."""
+    command: str
+    stdout: str
+    stderr: str
+    wall: float
+    peak_mb: float
+    rc: int
+
+
+@dataclass
+class Report:
+    """Sections of the generated page, in order."""
+    summary: list[tuple[str, str, str, str]] = field(default_factory=list)   # figure, value, target, met
+    sections: list[str] = field(default_factory=list)
+
+    def target(self, what: str, value: str, target: str, met: bool | None) -> None:
+        self.summary.append((what, value, target, "-" if met is None else ("yes" if met else "**no**")))
+
+
+def sh(cmd: str, env: dict[str, str] | None = None, cwd: Path = ROOT) -> Run:
+    """Run a shell command under GNU time; never raises on a non-zero exit."""
+    e = dict(os.environ)
+    if env:
+        e.update(env)
+    with tempfile.NamedTemporaryFile("r", suffix=".time") as tf:
+        full = f"/usr/bin/time -f '%e %M' -o {tf.name} bash -c {shlex.quote(cmd)}"
+        p = subprocess.run(full, shell=True, cwd=cwd, env=e, capture_output=True, text=True)
+        fields = (tf.read().strip().splitlines() or ["nan nan"])[-1].split()
+    try:
+        wall, peak = float(fields[0]), float(fields[1]) / 1024.0
+    except (ValueError, IndexError):
+        wall, peak = float("nan"), float("nan")
+    return Run(cmd, p.stdout, p.stderr, wall, peak, p.returncode)
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem = ""
+    try:
+        kb = int(Path("/proc/meminfo").read_text().split()[1])
+        mem = f", {kb / 1024 ** 2:.0f} GiB"
+    except (OSError, ValueError, IndexError):
+        pass
+    return f"{os.cpu_count()} cores ({cpu}){mem}, {platform.system()} {platform.release()}"
+
+
+def load() -> str:
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "unknown"
+
+
+def block(title: str, cmd: str, text: str, note: str = "") -> str:
+    body = text.strip() or "(no output)"
+    out = f"### {title}\n\nCommand: `{cmd}`  \nLoad average before the run: {load()}\n\n"
+    if note:
+        out += note.strip() + "\n\n"
+    return out + "```\n" + body + "\n```\n"
+
+
+def fpm_bench(rep: Report, name: str, title: str, anm_flags: str, args: str = "") -> str:
+    cmd = f'OMP_NUM_THREADS=1 fpm run --profile release --flag "$ANM_FFLAGS" {name} {args}'.strip()
+    r = sh(f"fpm run --profile release --flag {shlex.quote(anm_flags)} {name} {args} 2>/dev/null",
+           env={"OMP_NUM_THREADS": "1"})
+    text = r.stdout if r.rc == 0 else r.stdout + "\n(exit code %d)\n" % r.rc + r.stderr[-2000:]
+    rep.sections.append(block(title, cmd, text))
+    return text if r.rc == 0 else ""
+
+
+def sh_targets(rep: Report, text: str) -> None:
+    m = re.search(r"grid 120x240 degree 14: r only\s+([\d.]+) ms", text)
+    if m:
+        v = float(m.group(1))
+        rep.target("SH synthesis, 120 x 240 grid, degree 14, 1 thread", f"{v:.3f} ms", "<= 0.3 ms", v <= 0.3)
+
+
+def shells_targets(rep: Report, text: str) -> None:
+    cpu, wall = [], []
+    for line in text.splitlines():
+        f = line.split()
+        if line.startswith("#") or len(f) < 4 or f[1] == "layers":
+            continue
+        try:
+            wall.append(float(f[2]))
+            cpu.append(float(f[3]))
+        except ValueError:
+            continue
+    if cpu:
+        rep.target(f"shell construction, degree 14, 120-point grid, 1 thread: slowest of {len(cpu)} shells "
+                   "(0.1 / 2 / 10 % L)", f"{max(cpu):.1f} ms CPU ({max(wall):.1f} ms wall)", "<= 20 ms",
+                   max(cpu) <= 20)
+
+
+def contact_targets(rep: Report, text: str) -> None:
+    degree = None
+    for line in text.splitlines():
+        m = re.match(r"# contact, degree (\d+)", line)
+        if m:
+            degree = int(m.group(1))
+            continue
+        m = re.match(r"\s+(.*?)\s+EOB\s+([\d.]+)\s+[\d.]+\s+hits\s+\d+\s+certified\s+([\d.]+)", line)
+        if m and degree == 14 and m.group(1).startswith("near"):
+            eob, cert = float(m.group(2)), float(m.group(3))
+            rep.target("contact, near-but-not-touching pairs, degree 14: median EOB / certified",
+                       f"{eob:.1f} / {cert:.1f} us", "<= 20 us", max(eob, cert) <= 20)
+
+
+# --------------------------------------------------------------------------------------------
+# parking jobs
+
+
+@dataclass
+class Job:
+    """A parking run: summary table parsed from `anm run`'s stdout."""
+    run: Run
+    total_target: float = float("nan")
+    total: float = float("nan")
+    particles: int = 0
+    sieves: list[tuple[int, float, float, int]] = field(default_factory=list)   # id, target, achieved, n
+    verify: str = "not run"
+    verify_ok: bool = False
+    model: Path | None = None
+
+
+def parse_summary(text: str) -> tuple[list[tuple[int, float, float, int]], tuple[float, float, int] | None]:
+    sieves, total = [], None
+    for line in text.splitlines():
+        m = re.match(r"\s*(\d+)\s+[\d.]+\s+-\s+[\d.]+\s+([\d.]+)\s+([\d.]+)\s+[-\d.]+\s+(\d+)\s*$", line)
+        if m:
+            sieves.append((int(m.group(1)), float(m.group(2)), float(m.group(3)), int(m.group(4))))
+        m = re.match(r"total\s+([\d.]+)\s+([\d.]+)\s+(\d+)\s*$", line)
+        if m:
+            total = (float(m.group(1)), float(m.group(2)), int(m.group(3)))
+    return sieves, total
+
+
+def park(anm: str, nml: Path, tmp: Path, name: str, threads: int, edits: dict[str, str] | None = None,
+         verify: bool = True) -> Job:
+    """Run `anm run` on a copy of a namelist whose output directory is a temporary folder."""
+    text = nml.read_text()
+    text = re.sub(r"directory\s*=\s*'[^']*'", f"directory = '{tmp / name}'", text)
+    for old, new in (edits or {}).items():
+        if old not in text:
+            raise SystemExit(f"bench/run_all.py: {nml}: cannot find {old!r} to edit")
+        text = text.replace(old, new)
+    copy = tmp / f"{name}.nml"
+    copy.write_text(text)
+    r = sh(f"{shlex.quote(anm)} run {shlex.quote(str(copy))}", env={"OMP_NUM_THREADS": str(threads)})
+    job = Job(r)
+    job.sieves, total = parse_summary(r.stdout)
+    if total:
+        job.total_target, job.total, job.particles = total
+    m = re.search(r"model:\s*(\S+\.h5)", r.stdout)
+    job.model = Path(m.group(1)) if m else None
+    if verify and r.rc == 0 and job.model and job.model.exists():
+        v = sh(f"{shlex.quote(anm)} verify {shlex.quote(str(job.model))}", env={"OMP_NUM_THREADS": "2"})
+        last = [ln for ln in (v.stdout + v.stderr).strip().splitlines() if ln.strip()]
+        job.verify_ok = v.rc == 0
+        job.verify = f"{'passed' if v.rc == 0 else 'FAILED'} in {v.wall:.1f} s" + (f" ({last[-1].strip()})" if last else "")
+    return job
+
+
+def job_row(label: str, threads: int, job: Job) -> str:
+    r = job.run
+    res = f"PD {job.total:.4f} of {job.total_target:.4f}" if job.particles else f"failed (exit {r.rc})"
+    return (f"| {label} | {threads} | {r.wall:.2f} s | {r.peak_mb:.0f} MB | {job.particles:,} | {res} | "
+            f"{job.verify} |")
+
+
+def same_model(a: Job, b: Job) -> str:
+    if not (a.model and b.model and a.model.exists() and b.model.exists()):
+        return "not compared"
+    code = ("import h5py,numpy as np,sys\n"
+            "a,b=h5py.File(sys.argv[1]),h5py.File(sys.argv[2])\n"
+            "names=[]\n"
+            "a.visit(lambda n: names.append(n) if isinstance(a[n],h5py.Dataset) else None)\n"
+            "skip={'run/namelist','run/resolved_namelist'}\n"
+            "bad=[n for n in names if n not in skip and (n not in b or not np.array_equal(a[n][()],b[n][()]))]\n"
+            "print('identical' if not bad else 'DIFFERENT: '+','.join(bad[:5]))\n")
+    p = subprocess.run([sys.executable, "-c", code, str(a.model), str(b.model)], capture_output=True, text=True)
+    # the namelist texts differ only in the output directory
+    return (p.stdout.strip() or p.stderr.strip()[-200:]) + " (all datasets but the namelist texts)"
+
+
+def parking_section(rep: Report, anm: str, tmp: Path, which: set[str]) -> None:
+    rows, notes = [], []
+    header = ("| job | threads | wall time | peak memory | particles | result | `anm verify` |\n"
+              "|---|---|---|---|---|---|---|")
+    speedups: dict[str, tuple[float, float]] = {}
+
+    if "default" in which:
+        j1 = park(anm, ROOT / "inputs/default.nml", tmp, "default1", 1)
+        j2 = park(anm, ROOT / "inputs/default.nml", tmp, "default2", 2)
+        rows += [job_row("default job (`inputs/default.nml`)", 1, j1), job_row("default job", 2, j2)]
+        speedups["default job"] = (j1.run.wall, j2.run.wall)
+        notes.append(f"Default job, 1 vs 2 threads: model datasets {same_model(j1, j2)}.")
+
+    if "msand" in which:
+        if SHAPES.is_dir():
+            j1 = park(anm, ROOT / "inputs/msand.nml", tmp, "msand1", 1)
+            j2 = park(anm, ROOT / "inputs/msand.nml", tmp, "msand2", 2)
+            rows += [job_row("M_sand (`inputs/msand.nml`)", 1, j1), job_row("M_sand", 2, j2)]
+            speedups["M_sand"] = (j1.run.wall, j2.run.wall)
+            notes.append(f"M_sand, 1 vs 2 threads: model datasets {same_model(j1, j2)}.")
+            eff = j1.run.wall / (2 * j2.run.wall)
+            rep.target("M_sand wall time, 2 threads", f"{j2.run.wall:.1f} s ({j2.particles:,} particles)", "<= 10 s",
+                       j2.run.wall <= 10 and j2.verify_ok)
+            rep.target("M_sand parallel efficiency at 2 threads", f"{eff:.2f}", ">= 0.85", eff >= 0.85)
+        else:
+            rows.append("| M_sand | - | not run: ../shared/shapes missing | | | | |")
+
+    if "table23" in which:
+        if SHAPES.is_dir():
+            base = "&parking max_locations = 1500 /"
+            ju = park(anm, ROOT / "inputs/table2_3.nml", tmp, "table23", 2)
+            jv = park(anm, ROOT / "inputs/table2_3_void.nml", tmp, "table23void", 2) \
+                if (ROOT / "inputs/table2_3_void.nml").exists() else \
+                park(anm, ROOT / "inputs/table2_3.nml", tmp, "table23void", 2,
+                     {base: "&parking max_locations = 1500, placement = 'void' /"})
+            rows += [job_row("Table 2.3 setup, uniform placement (`inputs/table2_3.nml`)", 2, ju),
+                     job_row("Table 2.3 setup, void placement (`inputs/table2_3_void.nml`)", 2, jv)]
+            dev = max((abs(a - t) / t for _, t, a, _ in jv.sieves), default=float("nan"))
+            per = ", ".join(f"{a:.4f}/{t:.4f}" for _, t, a, _ in jv.sieves)
+            notes.append(f"Table 2.3 with void placement, achieved/target per sieve: {per}; largest relative "
+                         f"deviation {100 * dev:.1f} %. Uniform placement per sieve: "
+                         + ", ".join(f"{a:.4f}" for _, _, a, _ in ju.sieves) + ".")
+            rep.target("Table 2.3 setup, void placement: total PD", f"{jv.total:.4f}", ">= 0.355",
+                       jv.total >= 0.355 - 5e-4 and jv.verify_ok)
+            rep.target("Table 2.3 setup, void placement: worst sieve", f"{100 * dev:.1f} % off its volume",
+                       "every sieve within 2 %", dev <= 0.02)
+        else:
+            rows.append("| Table 2.3 setup | - | not run: ../shared/shapes missing | | | | |")
+
+    if "million" in which:
+        nml = ROOT / "inputs/million.nml"
+        if nml.exists():
+            j = park(anm, nml, tmp, "million", 2)
+            rows.append(job_row("10^6 sand-like particles (`inputs/million.nml`)", 2, j))
+            rep.target("10^6 particles (order 5), 2 threads", f"{j.particles:,} particles in {j.run.wall:.0f} s, "
+                       f"{j.run.peak_mb / 1024:.2f} GB peak", "<= 2 min, <= 4 GB",
+                       j.particles >= 1_000_000 and j.run.wall <= 120 and j.run.peak_mb <= 4096 and j.verify_ok)
+        else:
+            rows.append("| 10^6 particles | - | not run: inputs/million.nml missing | | | | |")
+
+    if "rsa" in which:
+        rsa_section(rep, anm, tmp, rows, speedups)
+
+    if rows:
+        txt = ("## Parking\n\nEach job: `anm run` on the namelist (output directory moved to a temporary "
+               "folder) under `/usr/bin/time` with `OMP_NUM_THREADS` = threads, then `anm verify` on the "
+               f"model. Load average before the parking runs: {load()}.\n\n" + header + "\n" + "\n".join(rows)
+               + "\n\n" + "\n".join(f"- {n}" for n in notes) + "\n")
+        if speedups:
+            txt += ("\nSpeed-up S = T1 / T2 and efficiency E = S / 2 with 2 threads (our version of the thesis' "
+                    "Figs 2.18-2.20, which parallelised one contact test, not the parking):\n\n"
+                    "| job | T1 | T2 | speed-up | efficiency |\n|---|---|---|---|---|\n")
+            for k, (t1, t2) in speedups.items():
+                txt += f"| {k} | {t1:.2f} s | {t2:.2f} s | {t1 / t2:.2f} | {t1 / (2 * t2):.2f} |\n"
+            plot_speedup(speedups)
+            txt += "\n![speed-up](figures/speedup.png)\n"
+        rep.sections.append(txt)
+
+
+def rsa_section(rep: Report, anm: str, tmp: Path, rows: list[str], speedups: dict) -> None:
+    src = SHARED / "bench/rsa_spheres.c"
+    edge = 140.82046803408818   # 200,000 spheres of radius 1 at a packing fraction of 0.30
+    nml = tmp / "rsa_base.nml"
+    nml.write_text(f"&box length = {edge}, {edge}, {edge}, periodic = .true. /\n"
+                   "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.30, source = 'sphere', "
+                   "order = 0 /\n&parking max_locations = 1000000 /\n"
+                   "&output directory = 'x', name = 'model', vrml = .false. /\n")
+    ref = None
+    if src.exists():
+        ref = tmp / "rsa_spheres"
+        subprocess.run(["gcc", "-O2", "-march=native", "-o", str(ref), str(src), "-lm"], check=True)
+    anm1, anm2, refs = [], [], []
+    for rep_i in range(3):   # alternate the programs: the machine's speed drifts
+        if ref:
+            r = sh(f"{ref} 200000 0.30 1000000 1")
+            m = re.search(r"seconds\s+([\d.]+)", r.stdout)
+            if m:
+                refs.append(float(m.group(1)))
+        anm1.append(park(anm, nml, tmp, f"rsa1_{rep_i}", 1, verify=rep_i == 0))
+        anm2.append(park(anm, nml, tmp, f"rsa2_{rep_i}", 2, verify=rep_i == 0))
+    t1 = statistics.median(j.run.wall for j in anm1)
+    t2 = statistics.median(j.run.wall for j in anm2)
+    rows.append(job_row("RSA, 200,000 order-0 spheres to 0.30, periodic (median of 3)", 1, anm1[0])
+                .replace(f"{anm1[0].run.wall:.2f} s", f"{t1:.2f} s"))
+    rows.append(job_row("RSA (median of 3)", 2, anm2[0]).replace(f"{anm2[0].run.wall:.2f} s", f"{t2:.2f} s"))
+    speedups["RSA 200,000 spheres"] = (t1, t2)
+    if refs:
+        tr = statistics.median(refs)
+        rows.append(f"| reference `../shared/bench/rsa_spheres.c` (gcc -O2 -march=native; `rsa_spheres 200000 "
+                    f"0.30 1000000 1`, median of 3, its own loop time) | 1 | {tr:.2f} s | | 200,000 | | |")
+        rep.target("RSA 200,000 spheres, 1 thread / reference", f"{t1 / tr:.2f} ({t1:.2f} s / {tr:.2f} s)",
+                   "<= 1.5", t1 / tr <= 1.5)
+        rep.target("RSA 200,000 spheres, 2 threads / reference", f"{t2 / tr:.2f} ({t2:.2f} s / {tr:.2f} s)",
+                   "< 1 (faster)", t2 < tr)
+
+
+def plot_speedup(speedups: dict[str, tuple[float, float]]) -> None:
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(8, 3.2))
+    for k, (t1, t2) in speedups.items():
+        a1.plot([1, 2], [1, t1 / t2], "o-", label=k)
+        a2.plot([1, 2], [1, t1 / (2 * t2)], "o-", label=k)
+    a1.plot([1, 2], [1, 2], "k:", label="ideal")
+    a1.set_xlabel("threads"); a1.set_ylabel("speed-up T1/Tn"); a1.set_xticks([1, 2])
+    a2.axhline(0.85, color="k", ls=":", label="target 0.85")
+    a2.set_xlabel("threads"); a2.set_ylabel("efficiency"); a2.set_xticks([1, 2]); a2.set_ylim(0, 1.1)
+    a1.legend(fontsize=7); a2.legend(fontsize=7)
+    fig.tight_layout()
+    out = ROOT / "docs/figures/speedup.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=str(ROOT / "docs/performance.md"))
+    ap.add_argument("--skip", nargs="*", default=[], choices=ALL)
+    ap.add_argument("--only", nargs="*", default=[], choices=ALL)
+    ap.add_argument("--anm", default=str(ROOT / "build/install/bin/anm"))
+    args = ap.parse_args()
+    which = set(args.only or ALL) - set(args.skip)
+    flags = os.environ.get("ANM_FFLAGS", "-march=native -ffpe-summary=none")
+    if not Path(args.anm).exists():
+        print(f"bench/run_all.py: {args.anm} missing: run `bash scripts/build.sh` first", file=sys.stderr)
+        return 1
+    start = time.time()
+    rep = Report()
+    tmp = Path(tempfile.mkdtemp(prefix="anm-bench-"))
+    try:
+        if "sh" in which:
+            print("== bench-sh", file=sys.stderr)
+            sh_targets(rep, fpm_bench(rep, "bench-sh", "Spherical-harmonic synthesis (`bench-sh`)", flags))
+        if "shells" in which:
+            print("== bench-shells", file=sys.stderr)
+            shells_targets(rep, fpm_bench(rep, "bench-shells", "Shell construction (`bench-shells`)", flags))
+        if "contact" in which:
+            print("== bench-contact", file=sys.stderr)
+            contact_targets(rep, fpm_bench(rep, "bench-contact",
+                                           "Contact per pair, EOB and Newton-Raphson (`bench-contact`)", flags))
+        if which & {"default", "msand", "table23", "million", "rsa"}:
+            print("== parking", file=sys.stderr)
+            parking_section(rep, args.anm, tmp, which)
+        if "slicing" in which:
+            model = ROOT / "out/msand/model.h5"
+            if SHAPES.is_dir():
+                print("== slicing", file=sys.stderr)
+                if not model.exists():
+                    sh(f"{shlex.quote(args.anm)} run inputs/msand.nml")
+                r = sh(f"{sys.executable} bench/bench_slicing.py {model}", env={"OMP_NUM_THREADS": "2"})
+                rep.sections.append(block("Slices of M_sand (`bench/bench_slicing.py`)",
+                                          "OMP_NUM_THREADS=2 python3 bench/bench_slicing.py out/msand/model.h5",
+                                          r.stdout + (r.stderr[-1500:] if r.rc else "")))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    write_page(Path(args.out), rep, which, time.time() - start)
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+def write_page(out: Path, rep: Report, which: set[str], seconds: float) -> None:
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip() or "unknown"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                           capture_output=True, text=True).stdout.strip()
+    lines = [
+        "# Performance",
+        "",
+        "<!-- Generated by `bash scripts/benchmarks.sh` (bench/run_all.py). Do not edit by hand: "
+        "analysis goes to performance-notes.md. -->",
+        "",
+        "Benchmark figures (not timed tests), rewritten by one command:",
+        "",
+        "    bash scripts/benchmarks.sh            # all; --only NAME ... or --skip NAME ... for a part",
+        "",
+        f"Machine: {machine()}. Run: {datetime.datetime.now():%Y-%m-%d %H:%M}, commit {commit}"
+        f"{' (with uncommitted changes)' if dirty else ''}, {seconds / 60:.1f} min for the benchmarks run "
+        f"({', '.join(n for n in ALL if n in which)}). The machine may be shared: the load average before each "
+        "run is printed with it. How the figures were reached, profiles and history: "
+        "[performance-notes.md](performance-notes.md).",
+        "",
+    ]
+    if rep.summary:
+        lines += ["## Targets", "", "| figure | measured | target | met |", "|---|---|---|---|"]
+        lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rep.summary]
+        lines += [""]
+    lines += rep.sections
+    out.write_text("\n".join(lines).rstrip() + "\n")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
