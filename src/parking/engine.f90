@@ -116,7 +116,9 @@ contains
       integer(i8) :: attempts, attempts_sieve, t0, t1, tlast, rate
       integer :: s, np, k, b, nstream, nlev, np_frozen, batch, nthreads, batch_size_now
       integer(i8) :: tp1
-      logical :: keep, sieve_done, replaced
+      logical :: keep, sieve_done, moved_b
+      integer :: nmoved
+      integer, allocatable :: moved(:)
       logical, allocatable :: alone(:)
       real(wp), allocatable :: bx(:, :), br(:)
       type(attempt_type), allocatable :: at(:)
@@ -208,7 +210,7 @@ contains
             ! sequence. Adding particles only adds overlaps, so this is exactly the serial
             ! result whatever the batch size and the number of threads. The re-check is skipped
             ! for a particle whose bounding sphere meets no earlier one of the batch (found in
-            ! parallel), as long as no earlier particle of the batch has moved.
+            ! parallel) nor any earlier one parked elsewhere than its phase-1 position (`moved`).
             allocate (at(batch))
             batch_size_now = batch
             if (lazy) then
@@ -251,12 +253,14 @@ contains
             end do
             call first_in_reach(bx, br, cfg%box, cfg%periodic, alone)
             np_frozen = np
-            replaced = .false.
+            allocate (moved(batch))
+            nmoved = 0
             do b = 1, batch
                nstream = nstream + 1
-               if (.not. at(b)%done .and. (replaced .or. .not. alone(b))) then
+               moved_b = .false.
+               if (.not. at(b)%done .and. (.not. alone(b) .or. near_moved(b))) then
                   if (.not. fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, np_frozen, cand, cand_shift)) then
-                     replaced = .true.
+                     moved_b = .true.
                      do
                         call next_attempt(at(b), s)
                         if (at(b)%done) exit
@@ -286,6 +290,10 @@ contains
                   exit
                end if
                call add_particle(k, at(b)%c, at(b)%r, sc)
+               if (moved_b) then
+                  nmoved = nmoved + 1
+                  moved(nmoved) = b
+               end if
                vol = vol + v
                model%count(s) = model%count(s) + 1
                if (cfg%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
@@ -299,7 +307,7 @@ contains
                if (vg%stale > vg%nfree / 4) call vg%compact()
                if (vg%nfree == 0) sieve_done = .true.
             end if
-            deallocate (bx, br, alone)
+            deallocate (bx, br, alone, moved)
             batch = min(batch_limit, next_batch(batch_size_now, real(t1 - tp1, wp) / rate, target - vol, vol, &
                                                 model%count(s), nthreads))
             deallocate (at)
@@ -455,6 +463,25 @@ contains
             order(m + 1) = oi
          end do
       end subroutine likely_first
+
+      !> True when the bounding sphere of batch particle bb (phase-1 pose) meets that of a particle
+      !> of the batch parked at another pose than its phase-1 one (moved(1:nmoved)).
+      logical function near_moved(bb) result(near)
+         integer, intent(in) :: bb
+         integer :: i, mv
+         real(wp) :: d(3), lim
+         near = .false.
+         do i = 1, nmoved
+            mv = moved(i)
+            d = at(mv)%c - at(bb)%c
+            if (cfg%periodic) d = d - cfg%box * anint(d / cfg%box)
+            lim = br(bb) + at(mv)%sc * kinds(at(mv)%k)%r_out
+            if (sum(d**2) < lim * lim) then
+               near = .true.
+               return
+            end if
+         end do
+      end function near_moved
 
       !> Size of the next batch. Any size gives the same model, so it follows the machine: about
       !> `batch_seconds` of phase 1 (few synchronisations, which matters most when the cores are
