@@ -126,9 +126,19 @@ contains
       real(wp) :: carry
       logical :: reached
       real(wp) :: r_in
+      integer, allocatable :: same(:)
+      logical, allocatable :: built(:)
+      logical :: lazy
 
-      call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
+      call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, same, error)
       if (allocated(error)) return
+      ! kinds are built when first needed: with one shape and one size per particle, each
+      ! particle's kind is its stream's first draw, known before its batch runs (M_sand's two
+      ! coarse sieves draw about 8 of their 24 shapes); otherwise a sieve's kinds are built when it
+      ! starts
+      allocate (built(size(kinds)))
+      built = .false.
+      lazy = cfg%max_shapes == 1 .and. cfg%max_sizes == 1
       params%method = merge(contact_method%eob, contact_method%newton_raphson, cfg%contact_method == "eob")
       params%next = cfg%n_ext
       params%nbox = cfg%n_box
@@ -137,10 +147,9 @@ contains
       nlev = 1
       if (cfg%nlayer > 0 .and. cfg%thickness_unit == "mm") nlev = width_levels
       vbox = product(cfg%box)
-      rho_min = huge(1.0_wp)
-      do k = 1, size(kinds)
-         rho_min = min(rho_min, kinds(k)%r_out * cfg%min_width(kinds(k)%sieve) / kinds(k)%width)
-      end do
+      ! a bounding radius is at least half the particle's width (every caliper dimension lies in
+      ! the bounding sphere)
+      rho_min = 0.5_wp * minval(cfg%min_width(:cfg%nsieve))
       call new_cell_list(cl, cfg%box, cfg%periodic, rho_min, capacity=4096)
       allocate (center(3, 4096), rot(3, 3, 4096), scale(4096), rho(4096), sieve_of(4096), kind_of(4096))
       np = 0
@@ -171,6 +180,11 @@ contains
          nstream = 0
          sieve_done = .false.
          failures = 0
+         if (void .or. .not. lazy) then
+            call build_kinds(cfg, model, kinds, same, built, [(k, k=first_kind(s), first_kind(s) + nkind_sieve(s) - 1)], &
+                             error)
+            if (allocated(error)) return
+         end if
          if (void) then
             ! inscribed radius of the smallest particle this sieve can make
             r_in = huge(1.0_wp)
@@ -194,6 +208,10 @@ contains
             ! parallel), as long as no earlier particle of the batch has moved.
             allocate (at(batch))
             batch_size_now = batch
+            if (lazy) then
+               call build_kinds(cfg, model, kinds, same, built, [(first_kind_of(s, nstream + b), b=1, batch)], error)
+               if (allocated(error)) return
+            end if
             call system_clock(tp1)
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
             do b = 1, batch
@@ -294,6 +312,11 @@ contains
          end if
       end do
       call system_clock(t1)
+      ! the VRML output draws every kind
+      if (cfg%vrml) then
+         call build_kinds(cfg, model, kinds, same, built, [(k, k=1, size(kinds))], error)
+         if (allocated(error)) return
+      end if
 
       model%box = cfg%box
       model%periodic = cfg%periodic
@@ -455,8 +478,7 @@ contains
             a%r = random_rotation(a%rng)
          else if (a%is < cfg%max_shapes) then
             a%is = a%is + 1
-            ! kinds of a sieve: nlev blocks (width levels) of its shapes
-            a%kk = first_kind(sv) + a%rng%below(nkind_sieve(sv) / nlev) - 1
+            call pick_shape(a, sv)
             a%iz = 1
             call new_size(a, sv)
             a%io = 1
@@ -498,8 +520,34 @@ contains
          end associate
       end subroutine block
 
+      !> Draw a shape of sieve sv for an attempt sequence.
+      subroutine pick_shape(a, sv)
+         type(attempt_type), intent(inout) :: a
+         integer, intent(in) :: sv
+         ! kinds of a sieve: nlev blocks (width levels) of its shapes
+         a%kk = first_kind(sv) + a%rng%below(nkind_sieve(sv) / nlev) - 1
+      end subroutine pick_shape
+
+      !> The kind of the first attempt of particle `stream` of sieve sv (its first draws).
+      integer function first_kind_of(sv, stream) result(k)
+         integer, intent(in) :: sv, stream
+         type(attempt_type) :: a
+         call new_rng(a%rng, cfg%seed, int(sv, i8) * 4294967296_i8 + stream)
+         call pick_shape(a, sv)
+         call pick_size(a, sv)
+         k = a%k
+      end function first_kind_of
+
       !> Draw a new width (and width level) for the current shape of an attempt sequence.
       subroutine new_size(a, sv)
+         type(attempt_type), intent(inout) :: a
+         integer, intent(in) :: sv
+         call pick_size(a, sv)
+         a%sc = a%w / kinds(a%k)%width
+      end subroutine new_size
+
+      !> The draws of new_size: width level (kind) and width.
+      subroutine pick_size(a, sv)
          type(attempt_type), intent(inout) :: a
          integer, intent(in) :: sv
          integer :: lev
@@ -511,8 +559,7 @@ contains
             a%k = a%kk
             a%w = a%rng%uniform_range(cfg%min_width(sv), cfg%max_width(sv))
          end if
-         a%sc = a%w / kinds(a%k)%width
-      end subroutine new_size
+      end subroutine pick_size
 
       subroutine add_particle(kn, x, rr, s_)
          integer, intent(in) :: kn
@@ -639,19 +686,18 @@ contains
    end subroutine first_in_reach
 
    !> Load the shapes of every sieve (each distinct source once) and precompute every kind.
-   subroutine prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, error)
+   subroutine prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, same, error)
       type(run_config_type), intent(in) :: cfg
       type(model_type), intent(inout) :: model
       type(particle_kind_type), allocatable, intent(out) :: kinds(:)
       integer, allocatable, intent(out) :: first_kind(:), nkind_sieve(:)
+      !> The kind each kind is a copy of (itself when it is built on its own).
+      integer, allocatable, intent(out) :: same(:)
       type(error_type), allocatable, intent(out) :: error
       type(shape_set_type), allocatable :: sets(:)
       integer, allocatable :: set_of(:), set_first(:)
       character(len=512), allocatable :: src(:)
-      integer :: s, nset, k, i, ns, nlev, lev, total, n, j, sieve, level
-      integer, allocatable :: same(:)
-      type(error_type), allocatable :: errs(:)
-      logical, allocatable :: failed(:)
+      integer :: s, nset, k, i, ns, nlev, lev, total, n, j
 
       allocate (set_of(cfg%nsieve), src(cfg%nsieve))
       nset = 0
@@ -702,7 +748,7 @@ contains
          nkind_sieve(s) = size(sets(set_of(s))%shapes) * nlev
          n = n + nkind_sieve(s)
       end do
-      allocate (kinds(n), errs(n), failed(n))
+      allocate (kinds(n))
       do s = 1, cfg%nsieve
          ns = size(sets(set_of(s))%shapes)
          do lev = 1, nlev
@@ -717,7 +763,7 @@ contains
          end do
       end do
       ! a kind equal to an earlier one (same shape and order, and with shells in mm the same width:
-      ! e.g. two sieves of one source) is computed once and copied
+      ! e.g. two sieves of one source) is built once and copied (build_kinds)
       allocate (same(n))
       do i = 1, n
          same(i) = i
@@ -731,35 +777,65 @@ contains
             exit
          end do
       end do
-      failed = .false.
-      !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, n, same) private(i) schedule(dynamic)
-      do i = 1, n
-         if (same(i) /= i) cycle
-         block
-            type(error_type), allocatable :: err
-            call prepare_one(cfg, model%shapes(kinds(i)%shape), trim(model%shape_names(kinds(i)%shape)), kinds(i), err)
-            if (allocated(err)) then
-               failed(i) = .true.
-               errs(i) = err
-            end if
-         end block
-      end do
-      !$omp end parallel do
-      do i = 1, n
-         if (failed(i)) then
-            call fatal_error(error, errs(i)%message, errs(i)%stat)
-            return
-         end if
-      end do
-      do i = 1, n
-         if (same(i) == i) cycle
-         sieve = kinds(i)%sieve
-         level = kinds(i)%level
-         kinds(i) = kinds(same(i))
-         kinds(i)%sieve = sieve
-         kinds(i)%level = level
-      end do
    end subroutine prepare_kinds
+
+   !> Build the kinds `list` that are not built yet: their originals (`same`) in parallel, then the
+   !> copies. A failure (a shell that cannot be built) is returned.
+   subroutine build_kinds(cfg, model, kinds, same, built, list, error)
+      type(run_config_type), intent(in) :: cfg
+      type(model_type), intent(in) :: model
+      type(particle_kind_type), intent(inout) :: kinds(:)
+      integer, intent(in) :: same(:)
+      logical, intent(inout) :: built(:)
+      integer, intent(in) :: list(:)
+      type(error_type), allocatable, intent(out) :: error
+      type(error_type), allocatable :: errs(:)
+      logical, allocatable :: want(:), failed(:)
+      integer, allocatable :: todo(:)
+      integer :: i, k, sieve, level
+      allocate (want(size(kinds)))
+      want = .false.
+      do i = 1, size(list)
+         if (.not. built(list(i))) want(same(list(i))) = .true.
+      end do
+      want = want .and. .not. built
+      todo = pack([(k, k=1, size(kinds))], want)
+      if (size(todo) > 0) then
+         allocate (errs(size(todo)), failed(size(todo)))
+         failed = .false.
+         !$omp parallel do default(none) shared(kinds, model, cfg, errs, failed, todo) private(i) schedule(dynamic)
+         do i = 1, size(todo)
+            block
+               type(error_type), allocatable :: err
+               associate (kd => kinds(todo(i)))
+                  call prepare_one(cfg, model%shapes(kd%shape), trim(model%shape_names(kd%shape)), kd, err)
+               end associate
+               if (allocated(err)) then
+                  failed(i) = .true.
+                  errs(i) = err
+               end if
+            end block
+         end do
+         !$omp end parallel do
+         do i = 1, size(todo)
+            if (failed(i)) then
+               call fatal_error(error, errs(i)%message, errs(i)%stat)
+               return
+            end if
+         end do
+         built(todo) = .true.
+      end if
+      do i = 1, size(list)
+         k = list(i)
+         if (built(k)) cycle
+         sieve = kinds(k)%sieve
+         level = kinds(k)%level
+         kinds(k) = kinds(same(k))
+         kinds(k)%sieve = sieve
+         kinds(k)%level = level
+         built(k) = .true.
+      end do
+   end subroutine build_kinds
 
    !> Width of a kind's width level (shells in mm).
    pure real(wp) function level_width(cfg, kd) result(w)
