@@ -129,6 +129,8 @@ contains
       integer, allocatable :: same(:)
       logical, allocatable :: built(:)
       logical :: lazy
+      integer :: predicted, horizon
+      real(wp) :: vmean
 
       call prepare_kinds(cfg, model, kinds, first_kind, nkind_sieve, same, error)
       if (allocated(error)) return
@@ -180,6 +182,7 @@ contains
          nstream = 0
          sieve_done = .false.
          failures = 0
+         predicted = 0
          if (void .or. .not. lazy) then
             call build_kinds(cfg, model, kinds, same, built, [(k, k=first_kind(s), first_kind(s) + nkind_sieve(s) - 1)], &
                              error)
@@ -209,8 +212,21 @@ contains
             allocate (at(batch))
             batch_size_now = batch
             if (lazy) then
-               call build_kinds(cfg, model, kinds, same, built, [(first_kind_of(s, nstream + b), b=1, batch)], error)
-               if (allocated(error)) return
+               ! the kinds of this batch and of the particles the sieve will probably still need
+               ! (twice the missing volume over the mean particle volume: a sphere of the mean
+               ! width until particles are parked), built together so that they build in parallel
+               if (model%count(s) > 0) then
+                  vmean = vol / model%count(s)
+               else
+                  vmean = pi / 6.0_wp * (0.5_wp * (cfg%min_width(s) + cfg%max_width(s)))**3
+               end if
+               horizon = nstream + max(batch, nthreads + int(min(4096.0_wp, 2.0_wp * max(0.0_wp, target - vol) / vmean)))
+               if (horizon > predicted) then
+                  call build_kinds(cfg, model, kinds, same, built, [(first_kind_of(s, j), j=predicted + 1, horizon)], &
+                                   error)
+                  if (allocated(error)) return
+                  predicted = horizon
+               end if
             end if
             call system_clock(tp1)
             !$omp parallel do default(shared) private(b) schedule(dynamic, 1)
