@@ -4,7 +4,7 @@ module test_parking
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
-   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_io_model, only: model_type
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape

@@ -22,7 +22,7 @@ module anm_audit_verify
    use anm_core_kinds, only: wp, pi, i8
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
    use anm_io_model, only: model_type
-   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    implicit none
    private
 

@@ -32,7 +32,7 @@ module anm_parking_engine
    use anm_contact_overlap, only: contact_params_type, contact_method, bodies_overlap, body_crosses_walls
    use anm_shells_build, only: shell_report_type, build_layers
    use anm_parking_config, only: run_config_type, shell_mode, resolved_namelist
-   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_parking_void_grid, only: void_grid_type, new_void_grid
    use anm_io_model, only: model_type
    use omp_lib, only: omp_get_max_threads

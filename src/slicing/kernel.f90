@@ -7,7 +7,7 @@
 !> when its centre lies inside the outer surface of layer k and not inside layers < k or the
 !> particle; over all particles the smallest such k wins.
 !>
-!> Culling. Every particle is stored in a hierarchical cell list (`anm_parking_cell_list`) with its
+!> Culling. Every particle is stored in a hierarchical cell list (`anm_neighbours_cell_list`) with its
 !> bounding radius rho = s max(r_max of the particle, r_max of its outermost shell). The slice
 !> rectangle is tiled with squares; the cell-list query of each tile's circumscribed ball returns
 !> the particles (and periodic images) that may meet the tile. A candidate is kept when its
@@ -39,7 +39,7 @@ module anm_slicing_kernel
    use anm_core_statistics, only: median
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
-   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_slicing_plane, only: slice_plane_type
    use anm_slicing_form, only: slice_form_type
    use anm_slicing_stack, only: slice_stack_type, new_slice_stack, stack_radii, stack_table_bounds, &

@@ -1,7 +1,7 @@
 !> Which particle contains a point: the volume counterpart of the slicing kernel, used to measure
 !> volume fractions directly in 3D (thesis Eq 3.11 checks the slices against them).
 !>
-!> The particles are stored in a hierarchical cell list (`anm_parking_cell_list`) by their
+!> The particles are stored in a hierarchical cell list (`anm_neighbours_cell_list`) by their
 !> bounding spheres; for each point the cell list returns the particles (and periodic images)
 !> whose bounding sphere contains it, and the point-in-surface test |y| <= r(y / |y|) (body frame
 !> y = R^T (x - c) / s, certified bounds first) picks the first of them, in the cell list's
@@ -13,7 +13,7 @@
 module anm_slicing_points
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type, fatal_error, error_code
-   use anm_parking_cell_list, only: cell_list_type, new_cell_list
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_slicing_form, only: slice_form_type
    implicit none
    private

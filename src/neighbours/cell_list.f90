@@ -31,7 +31,7 @@
 !>     call cl%insert(i, center, rho, rin)
 !>     call cl%neighbours(center, rho, cand, shift, ncand, hit, rin=rin_q, jmin=j0)
 !>     call cl%query(center, rho, centers, radii, cand, shift, ncand)
-module anm_parking_cell_list
+module anm_neighbours_cell_list
    use anm_core_kinds, only: wp, sp
    implicit none
    private
@@ -519,4 +519,4 @@ contains
       cand(ncand) = jj
       shift(:, ncand) = s
    end subroutine push
-end module anm_parking_cell_list
+end module anm_neighbours_cell_list
