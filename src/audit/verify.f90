@@ -98,7 +98,97 @@ contains
       else if (allocated(model%min_width)) then
          report%tolerance = 1.0e-4_wp * minval(model%min_width)
       end if
-      ! distinct (shape, order) pairs (few: one sampled surface each)
+      call shape_keys(model, key, kshape, korder, nkey)
+      allocate (samp(nkey))
+      samp%shape = kshape(:nkey)
+      samp%order = korder(:nkey)
+      !$omp parallel do default(none) shared(samp, nkey, model, resolution) private(k) schedule(dynamic)
+      do k = 1, nkey
+         call sample_shape(model%shapes(samp(k)%shape), samp(k)%order, resolution, samp(k))
+      end do
+      !$omp end parallel do
+      allocate (rho(model%np))
+      do p = 1, model%np
+         rho(p) = samp(key(p))%rmax * model%scale(p)
+      end do
+      call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp))
+      do p = 1, model%np
+         call cl%insert(p, wrap(model, model%center(:, p)), rho(p))
+      end do
+      npairs = 0
+      nover = 0
+      depth_max = 0.0_wp
+      worst_depth = 0.0_wp
+      nwall = 0
+      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned) private(p) &
+      !$omp& reduction(+:npairs, nover, nwall) reduction(max:depth_max)
+      block
+         integer, allocatable :: cand(:)
+         real(wp), allocatable :: shift(:, :)
+         real(wp), allocatable :: cw(:, :)
+         integer :: ncand, i, q
+         real(wp) :: d, dw
+         logical :: hit
+         allocate (cw(3, model%np))
+         do i = 1, model%np
+            cw(:, i) = wrap(model, model%center(:, i))
+         end do
+         !$omp do schedule(dynamic, 16)
+         do p = 1, model%np
+            if (.not. model%periodic) then
+               dw = wall_depth(model, samp, key, p)
+               if (dw > report%tolerance) nwall = nwall + 1
+               if (dw > depth_max) depth_max = dw
+            end if
+            ! each pair once: (p, q + s) and (q, p - s) are the same pair, so only q <= p (a large
+            ! particle, parked first, then shares its many pairs with the small ones instead of
+            ! keeping them all on one thread); a particle may meet its own periodic image in a box
+            ! smaller than twice its size
+            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmax=p)
+            do i = 1, ncand
+               q = cand(i)
+               ! the stored radii are rounded up: the exact bounding-sphere test
+               if (sum((cw(:, q) + shift(:, i) - cw(:, p))**2) >= (rho(p) + rho(q))**2) cycle
+               if (q == p) then
+                  if (all(shift(:, i) == 0.0_wp)) cycle
+                  if (.not. positive(shift(:, i))) cycle
+               end if
+               npairs = npairs + 1
+               d = max(pair_depth(model, samp, key, rho, pruned, p, cw(:, p), q, cw(:, q) + shift(:, i)), &
+                       pair_depth(model, samp, key, rho, pruned, q, cw(:, q) + shift(:, i), p, cw(:, p)))
+               if (d > report%tolerance) nover = nover + 1
+               if (d > depth_max) then
+                  depth_max = d
+                  !$omp critical (verify_worst)
+                  if (d > worst_depth) then
+                     worst_depth = d
+                     report%worst = [q, p]
+                  end if
+                  !$omp end critical (verify_worst)
+               end if
+            end do
+         end do
+         !$omp end do
+      end block
+      !$omp end parallel
+      report%pairs_checked = npairs
+      report%overlapping_pairs = nover
+      report%wall_violations = nwall
+      report%max_depth = depth_max
+   end subroutine verify_model
+
+   !> The distinct (shape, order) pairs of a model (few: one sampled surface each) and the pair of
+   !> each particle.
+   pure subroutine shape_keys(model, key, kshape, korder, nkey)
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Pair of each particle (1..nkey).
+      integer, allocatable, intent(out) :: key(:)
+      !> Shape and order of each pair (entries beyond nkey unused).
+      integer, allocatable, intent(out) :: kshape(:), korder(:)
+      !> Number of pairs.
+      integer, intent(out) :: nkey
+      integer :: p, k
       allocate (key(model%np), kshape(16), korder(16))
       nkey = 0
       do p = 1, model%np
@@ -120,171 +210,116 @@ contains
             key(p) = nkey
          end if
       end do
-      allocate (samp(nkey))
-      samp%shape = kshape(:nkey)
-      samp%order = korder(:nkey)
-      !$omp parallel do default(none) shared(samp, nkey, model, resolution) private(k) schedule(dynamic)
-      do k = 1, nkey
-         call sample_shape(model%shapes(samp(k)%shape), samp(k)%order, resolution, samp(k))
-      end do
-      !$omp end parallel do
-      allocate (rho(model%np))
-      do p = 1, model%np
-         rho(p) = samp(key(p))%rmax * model%scale(p)
-      end do
-      call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp))
-      do p = 1, model%np
-         call cl%insert(p, wrap(model%center(:, p)), rho(p))
-      end do
-      npairs = 0
-      nover = 0
-      depth_max = 0.0_wp
-      worst_depth = 0.0_wp
-      nwall = 0
-      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned) private(p) &
-      !$omp& reduction(+:npairs, nover, nwall) reduction(max:depth_max)
-      block
-         integer, allocatable :: cand(:)
-         real(wp), allocatable :: shift(:, :)
-         real(wp), allocatable :: cw(:, :)
-         integer :: ncand, i, q
-         real(wp) :: d, dw
-         logical :: hit
-         allocate (cw(3, model%np))
-         do i = 1, model%np
-            cw(:, i) = wrap(model%center(:, i))
-         end do
-         !$omp do schedule(dynamic, 16)
-         do p = 1, model%np
-            if (.not. model%periodic) then
-               dw = wall_depth(p)
-               if (dw > report%tolerance) nwall = nwall + 1
-               if (dw > depth_max) depth_max = dw
-            end if
-            ! each pair once: (p, q + s) and (q, p - s) are the same pair, so only q <= p (a large
-            ! particle, parked first, then shares its many pairs with the small ones instead of
-            ! keeping them all on one thread); a particle may meet its own periodic image in a box
-            ! smaller than twice its size
-            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmax=p)
-            do i = 1, ncand
-               q = cand(i)
-               ! the stored radii are rounded up: the exact bounding-sphere test
-               if (sum((cw(:, q) + shift(:, i) - cw(:, p))**2) >= (rho(p) + rho(q))**2) cycle
-               if (q == p) then
-                  if (all(shift(:, i) == 0.0_wp)) cycle
-                  if (.not. positive(shift(:, i))) cycle
-               end if
-               npairs = npairs + 1
-               d = max(pair_depth(p, cw(:, p), q, cw(:, q) + shift(:, i)), &
-                       pair_depth(q, cw(:, q) + shift(:, i), p, cw(:, p)))
-               if (d > report%tolerance) nover = nover + 1
-               if (d > depth_max) then
-                  depth_max = d
-                  !$omp critical (verify_worst)
-                  if (d > worst_depth) then
-                     worst_depth = d
-                     report%worst = [q, p]
-                  end if
-                  !$omp end critical (verify_worst)
-               end if
-            end do
-         end do
-         !$omp end do
-      end block
-      !$omp end parallel
-      report%pairs_checked = npairs
-      report%overlapping_pairs = nover
-      report%wall_violations = nwall
-      report%max_depth = depth_max
-   contains
-      pure logical function positive(v)
-         real(wp), intent(in) :: v(3)
-         positive = v(1) > 0.0_wp .or. (v(1) == 0.0_wp .and. (v(2) > 0.0_wp .or. (v(2) == 0.0_wp .and. v(3) > 0.0_wp)))
-      end function positive
+   end subroutine shape_keys
 
-      pure function wrap(c) result(w)
-         real(wp), intent(in) :: c(3)
-         real(wp) :: w(3)
-         if (model%periodic) then
-            w = modulo(c, model%box)
-         else
-            w = c
+   !> Whether a periodic shift is lexicographically positive (each self-image pair once).
+   pure logical function positive(v)
+      !> Shift.
+      real(wp), intent(in) :: v(3)
+      positive = v(1) > 0.0_wp .or. (v(1) == 0.0_wp .and. (v(2) > 0.0_wp .or. (v(2) == 0.0_wp .and. v(3) > 0.0_wp)))
+   end function positive
+
+   !> A centre wrapped into the box when the model is periodic.
+   pure function wrap(model, c) result(w)
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Centre.
+      real(wp), intent(in) :: c(3)
+      real(wp) :: w(3)
+      if (model%periodic) then
+         w = modulo(c, model%box)
+      else
+         w = c
+      end if
+   end function wrap
+
+   !> Largest radial penetration of A's sampled surface points into B (mm), 0 if none. Only
+   !> the blocks of samples whose bounding balls meet B's bounding sphere are visited.
+   function pair_depth(model, samp, key, rho, pruned, a, ca, b, cb) result(depth)
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Sampled surfaces, the sampled surface of each particle, bounding radii (mm).
+      type(sampled_type), intent(in) :: samp(:)
+      integer, intent(in) :: key(:)
+      real(wp), intent(in) :: rho(:)
+      !> Skip the samples that the block bounds place outside B.
+      logical, intent(in) :: pruned
+      !> Particles A and B and their (image) centres.
+      integer, intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), cb(3)
+      real(wp) :: depth, x(3), y(3), ly, sa, sb, m(3, 3), t(3), d(3), rb, rb2
+      integer :: i, j, ib, jb, jbw, ib0, ib1, jb0, jb1
+      depth = 0.0_wp
+      sa = model%scale(a)
+      sb = model%scale(b)
+      associate (sp => samp(key(a)), sq => samp(key(b)))
+         ! B's centre and bounding radius in A's body frame (A's shape units)
+         d = matmul(cb - ca, model%rotation(:, :, a)) / sa
+         rb = rho(b) / sa
+         rb2 = rb * rb
+         ! A body -> B body: y = m x + t
+         m = matmul(transpose(model%rotation(:, :, b)), model%rotation(:, :, a)) * (sa / sb)
+         t = matmul(ca - cb, model%rotation(:, :, b)) / sb
+         ib0 = 1
+         ib1 = sp%nbt
+         jb0 = 1
+         jb1 = sp%nbp
+         if (pruned) then
+            ! all of A (inside its bounding sphere) beyond B's surface
+            if (beyond(sq, t, rho(a) / sb)) return
+            ! only A's blocks whose directions meet B's bounding sphere
+            call cap_blocks(sp, d, rb, ib0, ib1, jb0, jb1)
          end if
-      end function wrap
-
-      !> Largest radial penetration of A's sampled surface points into B (mm), 0 if none. Only
-      !> the blocks of samples whose bounding balls meet B's bounding sphere are visited.
-      function pair_depth(a, ca, b, cb) result(depth)
-         integer, intent(in) :: a, b
-         real(wp), intent(in) :: ca(3), cb(3)
-         real(wp) :: depth, x(3), y(3), ly, sa, sb, m(3, 3), t(3), d(3), rb, rb2
-         integer :: i, j, ib, jb, jbw, ib0, ib1, jb0, jb1
-         depth = 0.0_wp
-         sa = model%scale(a)
-         sb = model%scale(b)
-         associate (sp => samp(key(a)), sq => samp(key(b)))
-            ! B's centre and bounding radius in A's body frame (A's shape units)
-            d = matmul(cb - ca, model%rotation(:, :, a)) / sa
-            rb = rho(b) / sa
-            rb2 = rb * rb
-            ! A body -> B body: y = m x + t
-            m = matmul(transpose(model%rotation(:, :, b)), model%rotation(:, :, a)) * (sa / sb)
-            t = matmul(ca - cb, model%rotation(:, :, b)) / sb
-            ib0 = 1
-            ib1 = sp%nbt
-            jb0 = 1
-            jb1 = sp%nbp
-            if (pruned) then
-               ! all of A (inside its bounding sphere) beyond B's surface
-               if (beyond(sq, t, rho(a) / sb)) return
-               ! only A's blocks whose directions meet B's bounding sphere
-               call cap_blocks(sp, d, rb, ib0, ib1, jb0, jb1)
-            end if
-            do jbw = jb0, jb1
-               jb = 1 + modulo(jbw - 1, sp%nbp)
-               do ib = ib0, ib1
-                  if (sum((sp%bc(:, ib, jb) - d)**2) >= (rb + sp%br(ib, jb))**2) cycle
-                  if (pruned) then
-                     if (beyond(sq, matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
-                  end if
-                  do j = (jb - 1) * block + 1, min(sp%np, jb * block)
-                     do i = (ib - 1) * block + 1, min(sp%nt, ib * block)
-                        x = sp%x(:, i, j)
-                        if (sum((x - d)**2) >= rb2) cycle
-                        y = matmul(m, x) + t
-                        ly = norm2(y)
-                        ! r_B cannot reach this point deeper than the depth found so far
-                        if (pruned .and. ly > 0.0_wp) then
-                           if (direction_bound(sq, y, ly) - ly <= depth / sb) cycle
-                        end if
-                        if (ly == 0.0_wp) then
-                           depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
-                        else
-                           depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
-                        end if
-                     end do
+         do jbw = jb0, jb1
+            jb = 1 + modulo(jbw - 1, sp%nbp)
+            do ib = ib0, ib1
+               if (sum((sp%bc(:, ib, jb) - d)**2) >= (rb + sp%br(ib, jb))**2) cycle
+               if (pruned) then
+                  if (beyond(sq, matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
+               end if
+               do j = (jb - 1) * block + 1, min(sp%np, jb * block)
+                  do i = (ib - 1) * block + 1, min(sp%nt, ib * block)
+                     x = sp%x(:, i, j)
+                     if (sum((x - d)**2) >= rb2) cycle
+                     y = matmul(m, x) + t
+                     ly = norm2(y)
+                     ! r_B cannot reach this point deeper than the depth found so far
+                     if (pruned .and. ly > 0.0_wp) then
+                        if (direction_bound(sq, y, ly) - ly <= depth / sb) cycle
+                     end if
+                     if (ly == 0.0_wp) then
+                        depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
+                     else
+                        depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
+                     end if
                   end do
                end do
             end do
-         end associate
-      end function pair_depth
+         end do
+      end associate
+   end function pair_depth
 
-      !> How far the sampled surface of particle a leaves the box (mm), 0 if inside.
-      function wall_depth(a) result(depth)
-         integer, intent(in) :: a
-         real(wp) :: depth, x(3)
-         integer :: i, j
-         depth = 0.0_wp
-         associate (sp => samp(key(a)))
-            do j = 1, sp%np
-               do i = 1, sp%nt
-                  x = model%center(:, a) + model%scale(a) * matmul(model%rotation(:, :, a), sp%x(:, i, j))
-                  depth = max(depth, maxval(-x), maxval(x - model%box))
-               end do
+   !> How far the sampled surface of particle a leaves the box (mm), 0 if inside.
+   function wall_depth(model, samp, key, a) result(depth)
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Sampled surfaces, the sampled surface of each particle.
+      type(sampled_type), intent(in) :: samp(:)
+      integer, intent(in) :: key(:)
+      !> Particle.
+      integer, intent(in) :: a
+      real(wp) :: depth, x(3)
+      integer :: i, j
+      depth = 0.0_wp
+      associate (sp => samp(key(a)))
+         do j = 1, sp%np
+            do i = 1, sp%nt
+               x = model%center(:, a) + model%scale(a) * matmul(model%rotation(:, :, a), sp%x(:, i, j))
+               depth = max(depth, maxval(-x), maxval(x - model%box))
             end do
-         end associate
-      end function wall_depth
-   end subroutine verify_model
+         end do
+      end associate
+   end function wall_depth
 
    !> True when no point of the ball (c, r) (B's body frame, shape units) can lie inside B: the
    !> ball is farther from B's centre than B's radius bound over every block its cap touches.

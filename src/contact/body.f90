@@ -257,8 +257,7 @@ contains
       real(wp), allocatable :: rg(:, :), rt(:, :), rp(:, :), h11(:, :), h12(:, :), h22(:, :), clo(:, :), chi(:, :), &
                                dcr(:), obb_c(:, :), obb_e(:, :, :), obb_h(:, :), trig(:, :), bv(:, :, :), w(:, :)
       integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, np_tot, kc, nd, ip, i0, nr
-      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, smx, hi, lo, ang, mu, d3(3), margin, rbound
-      real(wp) :: e(3)
+      real(wp) :: dth, dph, smin, smax, ms, dmax, mm, smx, hi, lo, margin, rbound
 
       if (present(nused)) then
          body%shape = sh_truncate(shape, nused)
@@ -304,29 +303,8 @@ contains
          end if
          dcr(i) = 0.5_wp * (dth + smx * dph)
       end do
-      ! sin and cos of the grid's polar angles (rows 1, 2) and azimuths (rows 3, 4)
-      allocate (trig(4, 0:max(ntg, npg)))
-      do i = 0, ntg
-         trig(1, i) = sin(pi * i / ntg)
-         trig(2, i) = cos(pi * i / ntg)
-      end do
-      do j = 0, npg
-         trig(3, j) = sin(two_pi * mod(j, npg) / npg)
-         trig(4, j) = cos(two_pi * mod(j, npg) / npg)
-      end do
-      ! storage
-      nd = 0
-      do l = leaf_level + 1, stored_level
-         body%doff(l) = nd
-         nd = nd + patch_rows(l) * patch_cols(l)
-      end do
-      body%doff(stored_level + 1) = nd
-      np_tot = 0
-      do l = 0, leaf_level
-         body%off(l) = np_tot
-         np_tot = np_tot + patch_rows(l) * patch_cols(l)
-      end do
-      body%off(leaf_level + 1) = np_tot
+      call grid_trig(ntg, npg, trig)
+      call storage_offsets(body, nd, np_tot)
       allocate (body%dlo(nd), body%dhi(nd), body%dir(3, np_tot), body%cosa(np_tot), body%sina(np_tot), &
                 body%rlo(np_tot), body%rhi(np_tot), body%ball(3, np_tot), body%brad(np_tot), &
                 body%node(node_size, np_tot), obb_c(3, np_tot), obb_e(3, 3, np_tot), obb_h(3, np_tot))
@@ -369,24 +347,7 @@ contains
             end do
          end do
       end do
-      ! row and column tables of every stored level
-      allocate (body%row_ct(4 * (2**(stored_level + 1) - 1)), body%row_st(4 * (2**(stored_level + 1) - 1)), &
-                body%row_cosa(4 * (2**(stored_level + 1) - 1)), body%row_sina(4 * (2**(stored_level + 1) - 1)), &
-                body%col_cp(8 * (2**(stored_level + 1) - 1)), body%col_sp(8 * (2**(stored_level + 1) - 1)))
-      do l = 0, stored_level
-         body%roff(l) = 4 * (2**l - 1)
-         body%coff(l) = 8 * (2**l - 1)
-         do i = 1, patch_rows(l)
-            call patch_cap(pi * (i - 1) / patch_rows(l), pi * i / patch_rows(l), 0.0_wp, two_pi / patch_cols(l), &
-                           d3, body%row_cosa(body%roff(l) + i), body%row_sina(body%roff(l) + i))
-            body%row_ct(body%roff(l) + i) = cos(pi * (i - 0.5_wp) / patch_rows(l))
-            body%row_st(body%roff(l) + i) = sin(pi * (i - 0.5_wp) / patch_rows(l))
-         end do
-         do j = 1, patch_cols(l)
-            body%col_cp(body%coff(l) + j) = cos(two_pi * (j - 0.5_wp) / patch_cols(l))
-            body%col_sp(body%coff(l) + j) = sin(two_pi * (j - 0.5_wp) / patch_cols(l))
-         end do
-      end do
+      call row_column_tables(body)
       ! coarser patches from their children; caps and sector balls of every stored-cap level
       do l = leaf_level, 0, -1
          kc = cells_per_leaf * 2**(leaf_level - l)
@@ -420,7 +381,86 @@ contains
                           //to_string(body%r_min)//" <= 0)", error_code%not_star)
          return
       end if
-      do k = 1, np_tot
+      call fill_nodes(body, obb_c, obb_e, obb_h)
+      call guaranteed_box(body)
+      call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
+   end subroutine new_contact_body
+
+   !> Sines and cosines of the grid's polar angles pi i/ntg (rows 1, 2) and azimuths 2 pi j/npg
+   !> (rows 3, 4).
+   pure subroutine grid_trig(ntg, npg, trig)
+      !> Polar and azimuthal intervals of the grid.
+      integer, intent(in) :: ntg, npg
+      !> Table (4, 0:max(ntg, npg)).
+      real(wp), allocatable, intent(out) :: trig(:, :)
+      integer :: i, j
+      allocate (trig(4, 0:max(ntg, npg)))
+      do i = 0, ntg
+         trig(1, i) = sin(pi * i / ntg)
+         trig(2, i) = cos(pi * i / ntg)
+      end do
+      do j = 0, npg
+         trig(3, j) = sin(two_pi * mod(j, npg) / npg)
+         trig(4, j) = cos(two_pi * mod(j, npg) / npg)
+      end do
+   end subroutine grid_trig
+
+   !> Offsets of the stored levels in the packed patch arrays (`doff`: the deeper bound levels,
+   !> nd entries; `off`: the cap levels 0..leaf_level, np_tot patches).
+   pure subroutine storage_offsets(body, nd, np_tot)
+      !> Contact body being built.
+      type(contact_body_type), intent(inout) :: body
+      !> Number of stored bounds and of patches.
+      integer, intent(out) :: nd, np_tot
+      integer :: l
+      nd = 0
+      do l = leaf_level + 1, stored_level
+         body%doff(l) = nd
+         nd = nd + patch_rows(l) * patch_cols(l)
+      end do
+      body%doff(stored_level + 1) = nd
+      np_tot = 0
+      do l = 0, leaf_level
+         body%off(l) = np_tot
+         np_tot = np_tot + patch_rows(l) * patch_cols(l)
+      end do
+      body%off(leaf_level + 1) = np_tot
+   end subroutine storage_offsets
+
+   !> Row and column tables (cap cosines, centre sines and cosines) of every stored level.
+   pure subroutine row_column_tables(body)
+      !> Contact body being built.
+      type(contact_body_type), intent(inout) :: body
+      integer :: l, i, j
+      real(wp) :: d3(3)
+      allocate (body%row_ct(4 * (2**(stored_level + 1) - 1)), body%row_st(4 * (2**(stored_level + 1) - 1)), &
+                body%row_cosa(4 * (2**(stored_level + 1) - 1)), body%row_sina(4 * (2**(stored_level + 1) - 1)), &
+                body%col_cp(8 * (2**(stored_level + 1) - 1)), body%col_sp(8 * (2**(stored_level + 1) - 1)))
+      do l = 0, stored_level
+         body%roff(l) = 4 * (2**l - 1)
+         body%coff(l) = 8 * (2**l - 1)
+         do i = 1, patch_rows(l)
+            call patch_cap(pi * (i - 1) / patch_rows(l), pi * i / patch_rows(l), 0.0_wp, two_pi / patch_cols(l), &
+                           d3, body%row_cosa(body%roff(l) + i), body%row_sina(body%roff(l) + i))
+            body%row_ct(body%roff(l) + i) = cos(pi * (i - 0.5_wp) / patch_rows(l))
+            body%row_st(body%roff(l) + i) = sin(pi * (i - 0.5_wp) / patch_rows(l))
+         end do
+         do j = 1, patch_cols(l)
+            body%col_cp(body%coff(l) + j) = cos(two_pi * (j - 0.5_wp) / patch_cols(l))
+            body%col_sp(body%coff(l) + j) = sin(two_pi * (j - 0.5_wp) / patch_cols(l))
+         end do
+      end do
+   end subroutine row_column_tables
+
+   !> The node records (the patch data a contact test touches) from the patch arrays and the
+   !> patches' bounding boxes (centre, axes, half-widths).
+   pure subroutine fill_nodes(body, obb_c, obb_e, obb_h)
+      !> Contact body being built.
+      type(contact_body_type), intent(inout) :: body
+      !> Box centres (3, np), axes (3, 3, np) and half-widths (3, np) of the patches.
+      real(wp), intent(in) :: obb_c(:, :), obb_e(:, :, :), obb_h(:, :)
+      integer :: k
+      do k = 1, size(body%dir, 2)
          body%node(nd_dir:nd_dir + 2, k) = body%dir(:, k)
          body%node(nd_cosa, k) = body%cosa(k)
          body%node(nd_sina, k) = body%sina(k)
@@ -431,7 +471,15 @@ contains
          body%node(nd_ball:nd_ball + 2, k) = body%ball(:, k)
          body%node(nd_brad, k) = body%brad(k)
       end do
-      ! guaranteed box from the leaf sectors: max of x.e over a sector <= rho_max(u.e) * max_cap(u.e)
+   end subroutine fill_nodes
+
+   !> Guaranteed box of the body from the leaf sectors: max of x.e over a sector
+   !> <= rho_max(u.e) * max_cap(u.e).
+   pure subroutine guaranteed_box(body)
+      !> Contact body being built.
+      type(contact_body_type), intent(inout) :: body
+      integer :: k, i, j
+      real(wp) :: e(3), ang, mu, hi
       body%box_lo = huge(1.0_wp)
       body%box_hi = -huge(1.0_wp)
       do k = body%off(leaf_level) + 1, body%off(leaf_level + 1)
@@ -454,8 +502,7 @@ contains
             end do
          end do
       end do
-      call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
-   end subroutine new_contact_body
+   end subroutine guaranteed_box
 
    !> Certified bounds of r over the cells of one leaf row (grid rows 0..kb of the band). First
    !> order with the Bernstein curvature H = N^2 M:
@@ -684,7 +731,9 @@ contains
       e(:, 2) = cross(e(:, 3), e(:, 1))
    end function frame
 
-   !> Cross product.
+   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
+   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
+   !> bits (post/tests/test_identical_models.py).
    pure function cross(a, b) result(c)
       real(wp), intent(in) :: a(3), b(3)
       real(wp) :: c(3)

@@ -8,7 +8,7 @@ module anm_core_kinds
    implicit none
    private
 
-   public :: wp, sp, i4, i8, pi, two_pi, four_pi
+   public :: wp, sp, i4, i8, pi, two_pi, four_pi, inv_sqrt_4pi
 
    !> Working precision: IEEE double.
    integer, parameter :: wp = selected_real_kind(15)
@@ -24,4 +24,6 @@ module anm_core_kinds
    real(wp), parameter :: two_pi = 2.0_wp * pi
    !> 4 pi, the solid angle of the sphere.
    real(wp), parameter :: four_pi = 4.0_wp * pi
+   !> 1 / sqrt(4 pi), the spherical harmonic Y_0^0 (the seed of the Legendre recurrences).
+   real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
 end module anm_core_kinds

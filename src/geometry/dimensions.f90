@@ -88,6 +88,9 @@ contains
       thickness = best
    end subroutine particle_dimensions
 
+   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
+   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
+   !> bits (post/tests/test_identical_models.py).
    pure function cross(a, b) result(c)
       real(wp), intent(in) :: a(3), b(3)
       real(wp) :: c(3)

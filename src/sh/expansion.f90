@@ -1,6 +1,6 @@
 !> Real spherical-harmonic expansions r(theta, phi) of star-shaped particle surfaces.
 !>
-!> The file convention (DESIGN.md) is r = Re sum_{n,m} a_nm Y_n^m with complex orthonormal
+!> The file convention (docs/conventions.md) is r = Re sum_{n,m} a_nm Y_n^m with complex orthonormal
 !> Y_n^m (Condon-Shortley phase). Internally the expansion is stored in real form,
 !>     r = sum_n sum_{m=0..n} Pbar_n^m(cos theta) (A_nm cos(m phi) + B_nm sin(m phi)),
 !> with A_n0 = Re a_n0 and, for m > 0, A_nm = Re a_nm + (-1)^m Re a_{n,-m},
@@ -19,6 +19,7 @@ module anm_sh_expansion
    use anm_core_kinds, only: wp
    use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, &
       & legendre_theta_derivatives, packed_size
+   use anm_sh_kernel, only: sh_sum, sh_sum_slope
    implicit none
    private
 
@@ -207,48 +208,12 @@ contains
       r = radius_xs(self, cos(theta), sin(theta), cos(phi), sin(phi))
    end function radius
 
-   !> Fused evaluation from cos/sin of theta and phi. Columns whose sectoral seed has fallen below
-   !> 1e-250 are skipped: their contribution is below 1e-150 of r for any degree <= 100.
+   !> Fused evaluation from cos/sin of theta and phi (`anm_sh_kernel`).
    pure function radius_xs(self, x, s, cp, sp) result(r)
       type(sh_expansion_type), intent(in) :: self
       real(wp), intent(in) :: x, s, cp, sp
       real(wp) :: r
-      real(wp) :: pmm, v0, v1, v2, cm, sm, cnew, acc_a, acc_b
-      integer :: m, n, k0, nmax
-      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
-
-      nmax = self%nmax
-      pmm = inv_sqrt_4pi
-      cm = 1.0_wp   ! cos(m phi)
-      sm = 0.0_wp   ! sin(m phi)
-      r = 0.0_wp
-      do m = 0, nmax
-         if (m > 0) then
-            pmm = -self%table%sect(m) * s * pmm
-            if (abs(pmm) < 1.0e-250_wp) exit
-            cnew = cm * cp - sm * sp
-            sm = sm * cp + cm * sp
-            cm = cnew
-         end if
-         k0 = self%table%idx(m)
-         v1 = pmm
-         acc_a = self%a(m, m) * v1
-         acc_b = self%b(m, m) * v1
-         if (m < nmax) then
-            v0 = v1
-            v1 = self%table%ca(k0 + 1) * x * v0
-            acc_a = acc_a + self%a(m + 1, m) * v1
-            acc_b = acc_b + self%b(m + 1, m) * v1
-            do n = m + 2, nmax
-               v2 = self%table%ca(k0 + n - m) * x * v1 - self%table%cb(k0 + n - m) * v0
-               v0 = v1
-               v1 = v2
-               acc_a = acc_a + self%a(n, m) * v1
-               acc_b = acc_b + self%b(n, m) * v1
-            end do
-         end if
-         r = r + acc_a * cm + acc_b * sm
-      end do
+      r = sh_sum(self%table, self%a, self%b, self%nmax, x, s, cp, sp)
    end function radius_xs
 
    !> r and |grad r| = sqrt(r_theta^2 + r_phi_sin^2) along the direction u (body frame, need not be
@@ -265,9 +230,7 @@ contains
       real(wp), intent(out) :: r
       !> |grad r| at u (per radian).
       real(wp), intent(out) :: slope
-      real(wp) :: rho, len, x, s, cp, sp, pmm, v0, v1, v2, cm, sm, cnew, acc_a, acc_b, dt_a, dt_b, rt, rp
-      integer :: m, n, k0, nmax
-      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
+      real(wp) :: rho, len, x, s, cp, sp, rt, rp
 
       len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
       rho = sqrt(u(1)**2 + u(2)**2)
@@ -275,47 +238,7 @@ contains
       s = rho / len
       cp = u(1) / rho
       sp = u(2) / rho
-      nmax = self%nmax
-      pmm = inv_sqrt_4pi
-      cm = 1.0_wp
-      sm = 0.0_wp
-      r = 0.0_wp
-      rt = 0.0_wp
-      rp = 0.0_wp
-      do m = 0, nmax
-         if (m > 0) then
-            pmm = -self%table%sect(m) * s * pmm
-            if (abs(pmm) < 1.0e-250_wp) exit
-            cnew = cm * cp - sm * sp
-            sm = sm * cp + cm * sp
-            cm = cnew
-         end if
-         k0 = self%table%idx(m)
-         v1 = pmm
-         acc_a = self%a(m, m) * v1
-         acc_b = self%b(m, m) * v1
-         ! sin(theta) dPbar_m^m/dtheta = m x Pbar_m^m
-         dt_a = self%a(m, m) * (m * x * v1)
-         dt_b = self%b(m, m) * (m * x * v1)
-         v0 = 0.0_wp
-         do n = m + 1, nmax
-            if (n == m + 1) then
-               v2 = self%table%ca(k0 + 1) * x * v1
-            else
-               v2 = self%table%ca(k0 + n - m) * x * v1 - self%table%cb(k0 + n - m) * v0
-            end if
-            v0 = v1
-            v1 = v2
-            acc_a = acc_a + self%a(n, m) * v1
-            acc_b = acc_b + self%b(n, m) * v1
-            v2 = n * x * v1 - (2 * n + 1) / self%table%ca(k0 + n - m) * v0
-            dt_a = dt_a + self%a(n, m) * v2
-            dt_b = dt_b + self%b(n, m) * v2
-         end do
-         r = r + acc_a * cm + acc_b * sm
-         rt = rt + dt_a * cm + dt_b * sm
-         rp = rp + m * (acc_b * cm - acc_a * sm)
-      end do
+      call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
       slope = sqrt(rt**2 + rp**2) / s
    end subroutine radius_slope
 

@@ -368,7 +368,7 @@ contains
       real(wp), intent(out) :: lower(:, :)
       integer, intent(out) :: start(:, :)
       real(wp), allocatable :: qth(:, :), qph(:, :), align(:, :)
-      real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), bthlo(:), bthhi(:), bphlo(:), bphhi(:)
+      real(wp), allocatable :: bthlo(:), bthhi(:), bphlo(:), bphhi(:)
       real(wp), allocatable :: px(:), py(:), pz(:), nx(:), ny(:), nz(:)
       integer, allocatable :: rows(:)
       real(wp) :: q(3), qd(3), mth, mph, thlo, thhi, phlo, phhi, d, t2, c, dphi, rscale
@@ -380,28 +380,9 @@ contains
       np = surf%grid%sphere%nphi
       lm = surf%grid%lmax
       dphi = two_pi / np
-      allocate (qth(nt, np), qph(nt, np), align(nt, np), qx(nt), qy(nt), qz(nt), qn(nt), bthlo(nt), bthhi(nt), &
-                bphlo(nt), bphhi(nt), px(nt), py(nt), pz(nt), nx(nt), ny(nt), nz(nt))
-      ! offset points x + t n of the samples (and their sums over the first and last rings, towards
-      ! the poles), the polar angles and azimuths of their directions (one column at a time in
-      ! plain loops: the compiler vectorises acos and atan2)
-      pole_dir = 0.0_wp
-      do j = 1, np
-         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
-         do i = 1, nt
-            qx(i) = px(i) + t * nx(i)
-            qy(i) = py(i) + t * ny(i)
-            qz(i) = pz(i) + t * nz(i)
-            qn(i) = sqrt(qx(i) * qx(i) + qy(i) * qy(i) + qz(i) * qz(i))
-         end do
-         do i = 1, nt
-            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qz(i) / qn(i))))
-            qph(i, j) = atan2(qy(i) / qn(i), qx(i) / qn(i))
-         end do
-         pole_dir(:, 1) = pole_dir(:, 1) + [qx(1), qy(1), qz(1)]
-         pole_dir(:, 2) = pole_dir(:, 2) + [qx(nt), qy(nt), qz(nt)]
-         start(:, j) = [(i + (j - 1) * nt, i = 1, nt)]
-      end do
+      allocate (qth(nt, np), qph(nt, np), align(nt, np), bthlo(nt), bthhi(nt), bphlo(nt), bphhi(nt), &
+                px(nt), py(nt), pz(nt), nx(nt), ny(nt), nz(nt))
+      call offset_directions(surf, t, qth, qph, pole_dir, start)
       do kc = 1, 2
          pole_dir(:, kc) = pole_dir(:, kc) / norm2(pole_dir(:, kc))
       end do
@@ -517,6 +498,45 @@ contains
          end do
       end do
    end subroutine sampled_starts
+
+   !> Offset points x + t n of the samples: the polar angles and azimuths of their directions and
+   !> their sums over the first and last rings (towards the poles); one column at a time in plain
+   !> loops (the compiler vectorises acos and atan2).
+   pure subroutine offset_directions(surf, t, qth, qph, pole_dir, start)
+      !> Surface data.
+      type(shell_surface_type), intent(in) :: surf
+      !> Offset distance.
+      real(wp), intent(in) :: t
+      !> Polar angle and azimuth of each sample's offset point (nt, np).
+      real(wp), intent(out) :: qth(:, :), qph(:, :)
+      !> Sums of the offset points of the first (1) and last (2) rings.
+      real(wp), intent(out) :: pole_dir(3, 2)
+      !> Each sample its own start (its index).
+      integer, intent(out) :: start(:, :)
+      real(wp), allocatable :: qx(:), qy(:), qz(:), qn(:), px(:), py(:), pz(:), nx(:), ny(:), nz(:)
+      integer :: nt, np, i, j
+
+      nt = surf%grid%sphere%ntheta
+      np = surf%grid%sphere%nphi
+      allocate (qx(nt), qy(nt), qz(nt), qn(nt), px(nt), py(nt), pz(nt), nx(nt), ny(nt), nz(nt))
+      pole_dir = 0.0_wp
+      do j = 1, np
+         call column_geometry(surf, j, px, py, pz, nx, ny, nz)
+         do i = 1, nt
+            qx(i) = px(i) + t * nx(i)
+            qy(i) = py(i) + t * ny(i)
+            qz(i) = pz(i) + t * nz(i)
+            qn(i) = sqrt(qx(i) * qx(i) + qy(i) * qy(i) + qz(i) * qz(i))
+         end do
+         do i = 1, nt
+            qth(i, j) = acos(max(-1.0_wp, min(1.0_wp, qz(i) / qn(i))))
+            qph(i, j) = atan2(qy(i) / qn(i), qx(i) / qn(i))
+         end do
+         pole_dir(:, 1) = pole_dir(:, 1) + [qx(1), qy(1), qz(1)]
+         pole_dir(:, 2) = pole_dir(:, 2) + [qx(nt), qy(nt), qz(nt)]
+         start(:, j) = [(i + (j - 1) * nt, i = 1, nt)]
+      end do
+   end subroutine offset_directions
 
    !> Widen the box [thlo, thhi] x [phlo, phhi] (phi relative to ph0, unwrapped) to hold (th, ph).
    pure subroutine widen(th, ph, ph0, thlo, thhi, phlo, phhi)
@@ -850,8 +870,9 @@ contains
       d = a(:, 1) * b(:, 1) + a(:, 2) * b(:, 2) + a(:, 3) * b(:, 3)
    end function dot_lanes
 
-   !> Cross product (the module's own copy of `cross3`, so that the compiler inlines it in the
-   !> Newton step).
+   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
+   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
+   !> bits (post/tests/test_identical_models.py).
    pure function cross(a, b) result(c)
       real(wp), intent(in) :: a(3), b(3)
       real(wp) :: c(3)

@@ -20,12 +20,12 @@ module anm_shells_surface
    use anm_sh_grid, only: sh_grid_type
    use anm_sh_quadrature, only: new_sphere_grid
    use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, packed_size
+   use anm_sh_kernel, only: sh_lanes, sh_sum_surface, sh_sum_surface_lanes
    implicit none
    private
 
-   !> Points per group of `eval_surface_many` (four AVX-512 registers per quantity: independent
-   !> recurrence chains, all in L1; 8 and 16 were slower, 64 no better).
-   integer, parameter :: lanes = 32
+   !> Points per group of `eval_surface_many` (the kernel's lane count).
+   integer, parameter :: lanes = sh_lanes
 
    public :: shell_surface_type, new_shell_surface, eval_surface, eval_surface_many, surface_frame, &
       & surface_frame_trig, surface_distance, closest_point, cross3, grid_synthesis, grid_analysis, &
@@ -420,68 +420,8 @@ contains
       real(wp), intent(in) :: theta, phi
       !> r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2.
       real(wp), intent(out) :: f(6)
-      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
-      real(wp) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, msq
-      real(wp) :: a0, b0, a1, b1, ann, bnn, rn
-      integer :: m, n, k0, nmax
-
-      x = cos(theta)
-      s = sin(theta)
-      cp = cos(phi)
-      sp = sin(phi)
-      inv_s = 1.0_wp / s
-      cots = x * inv_s
-      nmax = surf%shape%nmax
-      pmm = inv_sqrt_4pi
-      cm = 1.0_wp
-      sm = 0.0_wp
-      f = 0.0_wp
-      do m = 0, nmax
-         if (m > 0) then
-            pmm = -surf%shape%table%sect(m) * s * pmm
-            if (abs(pmm) < 1.0e-250_wp) exit
-            cnew = cm * cp - sm * sp
-            sm = sm * cp + cm * sp
-            cm = cnew
-         end if
-         k0 = surf%shape%table%idx(m)
-         ! n = m
-         p0 = 0.0_wp
-         p1 = pmm
-         d1 = m * x * p1 * inv_s
-         rn = real(m, wp)
-         a0 = surf%shape%a(m, m) * p1
-         b0 = surf%shape%b(m, m) * p1
-         a1 = surf%shape%a(m, m) * d1
-         b1 = surf%shape%b(m, m) * d1
-         ann = surf%shape%a(m, m) * rn * (rn + 1.0_wp) * p1
-         bnn = surf%shape%b(m, m) * rn * (rn + 1.0_wp) * p1
-         do n = m + 1, nmax
-            rn = real(n, wp)
-            if (n == m + 1) then
-               p2 = surf%shape%table%ca(k0 + 1) * x * p1
-            else
-               p2 = surf%shape%table%ca(k0 + n - m) * x * p1 - surf%shape%table%cb(k0 + n - m) * p0
-            end if
-            p0 = p1
-            p1 = p2
-            d1 = (rn * x * p1 - surf%enm(k0 + n - m) * p0) * inv_s
-            a0 = a0 + surf%shape%a(n, m) * p1
-            b0 = b0 + surf%shape%b(n, m) * p1
-            a1 = a1 + surf%shape%a(n, m) * d1
-            b1 = b1 + surf%shape%b(n, m) * d1
-            ann = ann + surf%shape%a(n, m) * rn * (rn + 1.0_wp) * p1
-            bnn = bnn + surf%shape%b(n, m) * rn * (rn + 1.0_wp) * p1
-         end do
-         msq = real(m * m, wp)
-         f(1) = f(1) + a0 * cm + b0 * sm
-         f(2) = f(2) + a1 * cm + b1 * sm
-         f(3) = f(3) + m * (b0 * cm - a0 * sm)
-         ! Legendre equation: P'' = -cot(theta) P' - (n(n+1) - m^2/sin^2) P
-         f(4) = f(4) + (-cots * a1 - ann + msq * inv_s * inv_s * a0) * cm + (-cots * b1 - bnn + msq * inv_s * inv_s * b0) * sm
-         f(5) = f(5) + m * (b1 * cm - a1 * sm)
-         f(6) = f(6) - msq * (a0 * cm + b0 * sm)
-      end do
+      call sh_sum_surface(surf%shape%table, surf%shape%a, surf%shape%b, surf%enm, surf%shape%nmax, &
+         & cos(theta), sin(theta), cos(phi), sin(phi), f)
    end subroutine eval_surface
 
    !> `eval_surface` at many points at once, f(:, k) at (theta(k), phi(k)): the same recurrences
@@ -511,17 +451,12 @@ contains
       end do
    end subroutine eval_surface_many
 
-   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`); the azimuthal factors
-   !> are summed once per order and r_thetatheta follows from the Legendre equation at the end.
+   !> `eval_surface` at `lanes` points (the kernel of `eval_surface_many`, `sh_sum_surface_lanes`).
    pure subroutine eval_lanes(surf, theta, phi, f, sc)
       type(shell_surface_type), intent(in) :: surf
       real(wp), intent(in) :: theta(lanes), phi(lanes)
       real(wp), intent(out) :: f(lanes, 6), sc(lanes, 4)
-      real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
-      real(wp), dimension(lanes) :: x, s, cp, sp, cm, sm, cnew, pmm, p0, p1, p2, d1, cots, inv_s, &
-                                    a0, b0, a1, b1, ann, bnn, f1, f2, f3, f4, f5, f6, t0
-      real(wp) :: an, bn, ca, cb, en, rn, nn1, msq, rm
-      integer :: m, n, k0, nmax
+      real(wp), dimension(lanes) :: x, s, cp, sp
 
       x = cos(theta)
       s = sin(theta)
@@ -531,76 +466,8 @@ contains
       sc(:, 2) = x
       sc(:, 3) = sp
       sc(:, 4) = cp
-      inv_s = 1.0_wp / s
-      cots = x * inv_s
-      nmax = surf%shape%nmax
-      pmm = inv_sqrt_4pi
-      cm = 1.0_wp
-      sm = 0.0_wp
-      f1 = 0.0_wp
-      f2 = 0.0_wp
-      f3 = 0.0_wp
-      f4 = 0.0_wp
-      f5 = 0.0_wp
-      f6 = 0.0_wp
-      do m = 0, nmax
-         if (m > 0) then
-            pmm = -surf%shape%table%sect(m) * s * pmm
-            cnew = cm * cp - sm * sp
-            sm = sm * cp + cm * sp
-            cm = cnew
-         end if
-         k0 = surf%shape%table%idx(m)
-         rn = real(m, wp)
-         nn1 = rn * (rn + 1.0_wp)
-         an = surf%shape%a(m, m)
-         bn = surf%shape%b(m, m)
-         p0 = 0.0_wp
-         p1 = pmm
-         d1 = rn * x * p1 * inv_s
-         a0 = an * p1
-         b0 = bn * p1
-         a1 = an * d1
-         b1 = bn * d1
-         ann = an * nn1 * p1
-         bnn = bn * nn1 * p1
-         do n = m + 1, nmax
-            rn = real(n, wp)
-            nn1 = rn * (rn + 1.0_wp)
-            ca = surf%shape%table%ca(k0 + n - m)
-            cb = merge(0.0_wp, surf%shape%table%cb(k0 + n - m), n == m + 1)
-            en = surf%enm(k0 + n - m)
-            an = surf%shape%a(n, m)
-            bn = surf%shape%b(n, m)
-            p2 = ca * x * p1 - cb * p0
-            p0 = p1
-            p1 = p2
-            d1 = (rn * x * p1 - en * p0) * inv_s
-            a0 = a0 + an * p1
-            b0 = b0 + bn * p1
-            a1 = a1 + an * d1
-            b1 = b1 + bn * d1
-            ann = ann + (an * nn1) * p1
-            bnn = bnn + (bn * nn1) * p1
-         end do
-         rm = real(m, wp)
-         msq = rm * rm
-         ! the azimuthal factors (r_thetatheta from the Legendre equation at the end)
-         t0 = a0 * cm + b0 * sm
-         f1 = f1 + t0
-         f6 = f6 - msq * t0
-         f2 = f2 + (a1 * cm + b1 * sm)
-         f3 = f3 + rm * (b0 * cm - a0 * sm)
-         f5 = f5 + rm * (b1 * cm - a1 * sm)
-         f4 = f4 + (ann * cm + bnn * sm)
-      end do
-      ! Legendre equation: r_thetatheta = -cot r_theta - sum n (n + 1) r_nm - r_phiphi / sin^2
-      f(:, 1) = f1
-      f(:, 2) = f2
-      f(:, 3) = f3
-      f(:, 4) = -cots * f2 - f4 - f6 * (inv_s * inv_s)
-      f(:, 5) = f5
-      f(:, 6) = f6
+      call sh_sum_surface_lanes(surf%shape%table, surf%shape%a, surf%shape%b, surf%enm, surf%shape%nmax, &
+         & x, s, cp, sp, f)
    end subroutine eval_lanes
 
    !> Surface point, tangents and second derivatives at (theta, phi) from f of `eval_surface`:

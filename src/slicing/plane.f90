@@ -12,6 +12,7 @@
 !>     x = pixel_center(plane, i, j)
 module anm_slicing_plane
    use anm_core_kinds, only: wp
+   use anm_core_vector, only: cross
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    implicit none
@@ -130,9 +131,4 @@ contains
       x = plane%origin + ((i - 0.5_wp) * plane%pixel) * plane%u + ((j - 0.5_wp) * plane%pixel) * plane%v
    end function pixel_center
 
-   pure function cross(a, b) result(c)
-      real(wp), intent(in) :: a(3), b(3)
-      real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
-   end function cross
 end module anm_slicing_plane

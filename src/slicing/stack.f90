@@ -3,7 +3,7 @@
 !>
 !> The K layer surfaces of a particle (thesis section 3.3 masks) share the particle's body frame,
 !> so along one direction u all K radii r_k(u) come from one Legendre column recursion and one
-!> set of cos(m phi), sin(m phi): `stack_radii` runs the recursion of `radius_xs`
+!> set of cos(m phi), sin(m phi): `stack_radii` runs the recursion of `radius_xs` (`sh_sum_forms` of `anm_sh_kernel`)
 !> (anm_sh_expansion) once and accumulates the K forms side by side (the coefficients are stored
 !> form-fastest, so the accumulation is a short vector operation). Forms of lower degree are
 !> padded with zeros, which adds exact zeros: each r_k is the same sum as its own radius_dir.
@@ -30,6 +30,7 @@ module anm_slicing_stack
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type
    use anm_sh_legendre, only: legendre_table_type, new_legendre_table
+   use anm_sh_kernel, only: sh_sum_forms
    implicit none
    private
 
@@ -40,7 +41,6 @@ module anm_slicing_stack
    integer, parameter :: min_table_polar = 8, max_table_polar = 256
    !> Relative safety added to the table bounds against rounding in the radii and the cell lookup.
    real(wp), parameter :: table_slack = 1.0e-9_wp
-   real(wp), parameter :: inv_sqrt_4pi = 0.28209479177387814347403972578038630_wp
 
    !> Layer surfaces of one particle, evaluated together (immutable once built; shared by threads).
    type :: slice_stack_type
@@ -101,12 +101,9 @@ contains
       real(wp), intent(in) :: y(3)
       !> r(k) of form k, size >= nform.
       real(wp), intent(inout) :: r(:)
-      real(wp) :: acc(2 * stack%npad), racc(stack%npad)
-      real(wp) :: rho, len, x, s, cp, sp, pmm, v0, v1, v2, cm, sm, cnew, f1, f2
-      integer :: m, n, k0, nmax, np
+      real(wp) :: racc(stack%npad)
+      real(wp) :: rho, len, x, s, cp, sp
 
-      np = stack%npad
-      nmax = stack%nmax
       len = sqrt(y(1)**2 + y(2)**2 + y(3)**2)
       rho = sqrt(y(1)**2 + y(2)**2)
       x = y(3) / len
@@ -118,36 +115,7 @@ contains
          cp = 1.0_wp
          sp = 0.0_wp
       end if
-      pmm = inv_sqrt_4pi
-      cm = 1.0_wp
-      sm = 0.0_wp
-      racc = 0.0_wp
-      do m = 0, nmax
-         if (m > 0) then
-            pmm = -stack%table%sect(m) * s * pmm
-            if (abs(pmm) < 1.0e-250_wp) exit
-            cnew = cm * cp - sm * sp
-            sm = sm * cp + cm * sp
-            cm = cnew
-         end if
-         k0 = stack%table%idx(m)
-         v1 = pmm
-         acc = stack%c(:, m, m) * v1
-         if (m < nmax) then
-            v0 = v1
-            v1 = stack%table%ca(k0 + 1) * x * v0
-            acc = acc + stack%c(:, m + 1, m) * v1
-            do n = m + 2, nmax
-               f1 = stack%table%ca(k0 + n - m)
-               f2 = stack%table%cb(k0 + n - m)
-               v2 = f1 * x * v1 - f2 * v0
-               v0 = v1
-               v1 = v2
-               acc = acc + stack%c(:, n, m) * v1
-            end do
-         end if
-         racc = racc + acc(1:np) * cm + acc(np + 1:2 * np) * sm
-      end do
+      call sh_sum_forms(stack%table, stack%c, stack%npad, stack%nmax, x, s, cp, sp, racc)
       r(1:stack%nform) = racc(1:stack%nform)
    end subroutine stack_radii
 
