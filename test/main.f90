@@ -13,6 +13,9 @@ program tester
    use test_shells, only: collect_shells
    use test_contact, only: collect_contact
    use test_slicing, only: collect_slicing
+   use test_audit, only: collect_audit
+   use test_cli, only: collect_cli
+   use test_api, only: collect_api
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -23,7 +26,9 @@ program tester
              new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
              new_testsuite("io", collect_io), new_testsuite("parking", collect_parking), &
              new_testsuite("shells", collect_shells), &
-             new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing)]
+             new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing), &
+             new_testsuite("audit", collect_audit), new_testsuite("cli", collect_cli), &
+             new_testsuite("api", collect_api)]
    npass = 0
    nfail = 0
    nskip = 0

@@ -1,5 +1,6 @@
 !> Tests of the parking infrastructure: the hierarchical cell list against brute force for
-!> sizes differing 1000:1, in periodic and non-periodic boxes.
+!> sizes differing 1000:1, in periodic and non-periodic boxes, and the parking engine (the audit's
+!> own tests: test_audit).
 module test_parking
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
@@ -31,12 +32,6 @@ contains
                            test_neighbours_periodic), &
               new_unittest("neighbours: candidates, certain overlaps, id range = brute force, walls", test_neighbours_walls), &
               new_unittest("neighbours: all images in a small periodic box", test_neighbours_images), &
-              new_unittest("verify: separated spheres pass", test_verify_clear), &
-              new_unittest("verify: overlapping spheres fail with the exact depth", test_verify_overlap), &
-              new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
-              new_unittest("verify: a particle through a wall fails", test_verify_wall), &
-              new_unittest("verify: pruned sampling gives the report of every sample (sizes 8:1)", &
-                           test_verify_pruning), &
               new_unittest("RSA of spheres approaches saturation (>= 0.36)", test_rsa_spheres), &
               new_unittest("synthetic mortar reaches every target within 1 % and verifies", test_small_job), &
               new_unittest("walls: particles stay inside and verify passes", test_walls_job), &
@@ -197,104 +192,6 @@ contains
       type(error_type), allocatable, intent(out) :: error
       call run_case(error, .true., [4.0_wp, 4.0_wp, 4.0_wp], 0.5_wp, 1.5_wp, 50, 500)
    end subroutine test_cells_images
-   !> A model of spheres of radius 1 (shape 1) at the given centres.
-   function sphere_model(centers, periodic, box) result(m)
-      real(wp), intent(in) :: centers(:, :)
-      logical, intent(in) :: periodic
-      real(wp), intent(in) :: box(3)
-      type(model_type) :: m
-      type(rng_type) :: rng
-      integer :: p
-      call new_rng(rng, 5_i8, 0_i8)
-      m%box = box
-      m%periodic = periodic
-      allocate (m%shapes(1), m%shape_names(1))
-      m%shapes(1) = sphere_shape(1.0_wp)
-      m%shape_names(1) = "sphere"
-      m%np = size(centers, 2)
-      m%center = centers
-      allocate (m%rotation(3, 3, m%np))
-      do p = 1, m%np
-         m%rotation(:, :, p) = random_rotation(rng)
-      end do
-      m%scale = [(1.0_wp, p=1, m%np)]
-      m%shape = [(1, p=1, m%np)]
-      m%nmax = [(0, p=1, m%np)]
-      m%sieve = [(1, p=1, m%np)]
-      m%min_width = [2.0_wp]
-   end function sphere_model
-
-   subroutine test_verify_clear(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(verify_report_type) :: rep
-      ! gap of 1e-3 between the first two, the third far away
-      call verify_model(sphere_model(reshape([3.0_wp, 5.0_wp, 5.0_wp, 5.001_wp, 5.0_wp, 5.0_wp, 8.0_wp, 8.0_wp, 8.0_wp], &
-                                             [3, 3]), .false., [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
-      call check(error, rep%pairs_checked >= 1_i8 .and. rep%overlapping_pairs == 0_i8 .and. rep%wall_violations == 0, &
-                 "clear spheres flagged")
-   end subroutine test_verify_clear
-
-   subroutine test_verify_overlap(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(verify_report_type) :: rep
-      ! centres 1.98 apart: radial penetration 0.02 exactly along the line of centres
-      call verify_model(sphere_model(reshape([3.0_wp, 5.0_wp, 5.0_wp, 4.98_wp, 5.0_wp, 5.0_wp], [3, 2]), .false., &
-                                     [10.0_wp, 10.0_wp, 10.0_wp]), 120, rep)
-      call check(error, rep%overlapping_pairs == 1_i8, "overlap not found")
-      if (allocated(error)) return
-      print '(a,es10.3,a)', "        sphere overlap depth found ", rep%max_depth, " (exact 2.0e-2)"
-      call check(error, rep%max_depth, 0.02_wp, "depth", thr=2.0e-3_wp)
-   end subroutine test_verify_overlap
-
-   subroutine test_verify_periodic(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(verify_report_type) :: rep
-      ! 0.5 and 9.4 along x in a periodic 10 mm box: 1.1 apart through the boundary
-      call verify_model(sphere_model(reshape([0.5_wp, 5.0_wp, 5.0_wp, 9.4_wp, 5.0_wp, 5.0_wp], [3, 2]), .true., &
-                                     [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
-      call check(error, rep%overlapping_pairs == 1_i8, "periodic overlap not found")
-   end subroutine test_verify_periodic
-
-   subroutine test_verify_wall(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(verify_report_type) :: rep
-      call verify_model(sphere_model(reshape([0.99_wp, 5.0_wp, 5.0_wp], [3, 1]), .false., &
-                                     [10.0_wp, 10.0_wp, 10.0_wp]), 60, rep)
-      call check(error, rep%wall_violations, 1, "wall crossing not found")
-   end subroutine test_verify_wall
-   !> A parked model of synthetic shapes of two sizes (8:1), then the same with every particle
-   !> grown by 0.2 % and by 3 % (shallow and deeper overlaps): the block bounds must not change
-   !> the pairs, the count of overlaps, the worst pair or the deepest penetration.
-   subroutine test_verify_pruning(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(model_type) :: m
-      type(verify_report_type) :: fast, full
-      real(wp), allocatable :: scale0(:)
-      integer :: k
-      real(wp), parameter :: grow(3) = [1.0_wp, 1.002_wp, 1.03_wp]
-      call run_nml("prune.nml", "&box length = 6, 6, 6 /"//new_line("a")// &
-                   "&sieves nsieve = 2, min_width = 2.0, 0.25, max_width = 2.4, 0.3, fraction = 0.15, 0.08, " &
-                   //"order = 10, 5 /"//new_line("a")//"&synthetic count = 4 /"//new_line("a")//"&run seed = 5 /", m, error)
-      if (allocated(error)) return
-      scale0 = m%scale
-      do k = 1, 3
-         m%scale = scale0 * grow(k)
-         call verify_model(m, 48, fast)
-         call verify_model(m, 48, full, prune=.false.)
-         print '(a,f6.3,a,i0,a,i0,a,es10.3)', "        scale x", grow(k), ": ", full%pairs_checked, " pairs, ", &
-            full%overlapping_pairs, " overlapping, deepest ", full%max_depth
-         call check(error, fast%pairs_checked == full%pairs_checked .and. &
-                    fast%overlapping_pairs == full%overlapping_pairs .and. all(fast%worst == full%worst), &
-                    "pruned report differs")
-         if (allocated(error)) return
-         call check(error, fast%max_depth, full%max_depth, "deepest penetration", thr=0.0_wp)
-         if (allocated(error)) return
-         call check(error, full%pairs_checked > 0_i8 .and. (k == 1 .or. full%overlapping_pairs > 0_i8), &
-                    "no pairs or overlaps to compare")
-         if (allocated(error)) return
-      end do
-   end subroutine test_verify_pruning
-
    !> Batches of speculated particles (2 threads, phase 2 re-checks and continuations) against
    !> the plain serial algorithm (one particle at a time): dense spheres in a small box, where
    !> particles of a batch often meet, and a shaped mixture with shells.
