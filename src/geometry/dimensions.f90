@@ -1,4 +1,4 @@
-!> Length, width and thickness of a particle (definitions in DESIGN.md):
+!> Length, width and thickness of a particle (definitions in docs/conventions.md):
 !>   L: the longest surface-point-to-surface-point distance (the diameter of the body);
 !>   W: the longest surface-point-to-surface-point distance whose direction is perpendicular to L;
 !>   T: the longest such distance whose direction is perpendicular to both L and W.

@@ -6,7 +6,7 @@
 !> sqrt(u1) cos 2 pi u3). Uniform Euler angles are *not* uniform: they crowd the rotated axes
 !> towards the poles (the tests show it).
 !>
-!> Convention (DESIGN.md): R maps body to world, world = c + s R body; a world point x is inside
+!> Convention (docs/conventions.md): R maps body to world, world = c + s R body; a world point x is inside
 !> the particle iff y = R^T (x - c) / s satisfies |y| <= r(y/|y|).
 !>
 !> Usage:
