@@ -69,6 +69,8 @@ def _plane_from_args(args: argparse.Namespace, model):
     if args.center is not None or args.normal is not None:
         if args.center is None or args.normal is None or args.size is None:
             raise AnmPostError("--center, --normal and --size go together (an oblique slice)")
+        if not np.all(np.isfinite(np.asarray(args.center, float))):
+            raise AnmPostError(f"--center: must be a finite point, got {args.center}")
         n = np.asarray(args.normal, float)
         if not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
             raise AnmPostError(f"--normal: must be a non-zero vector, got {args.normal}")
@@ -255,9 +257,15 @@ def _cmd_rdf(args: argparse.Namespace) -> int:
 
 def _check_rdf_memory(st, spec, densities, args: argparse.Namespace) -> None:
     """Refuse up front RDF slices that would not fit in memory (16 slices labelled at once)."""
-    from .walleffect import _planes
-    planes = _planes(st, spec, max(densities))
-    _check_slice_memory(planes[0], 1, min(len(planes), 16), args)
+    from .resources import check_memory, slice_memory
+    from .slicing import n_max
+    k = "xyz".index(spec.axis)
+    iu, iv = [d for d in range(3) if d != k]
+    ext = np.asarray(st.hi, float) - np.asarray(st.lo, float)
+    nu, nv = (max(1, round(float(ext[d]) / spec.pixel)) for d in (iu, iv))
+    n = max(1, int(round(max(densities) * n_max(float(ext[k]), spec.pixel))))
+    need = slice_memory(nu * nv, 1, min(n, 16), png=False, labels=False)
+    check_memory(need, f"{n} slices of {nu} x {nv} pixels (16 at a time)", "--pixel")
 
 
 def _cmd_convergence(args: argparse.Namespace) -> int:
