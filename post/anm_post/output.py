@@ -30,7 +30,8 @@ TMP_MARK = ".anm-tmp-"
 
 def _error(path: Path, option: str, exc: OSError) -> AnmPostError:
     what = f" ({option})" if option else ""
-    reason = exc.strerror or str(exc)
+    # h5py's errors carry a long text (with the temporary name) besides errno: the errno says it
+    reason = os.strerror(exc.errno) if exc.errno else (exc.strerror or str(exc))
     return AnmPostError(f"{path}: cannot write{what}: {reason}; the earlier file, if any, is unchanged")
 
 
