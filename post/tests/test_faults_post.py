@@ -195,3 +195,22 @@ def test_two_processes_writing_one_output(tmp_path, inputs):
     with np.load(expect) as data:
         assert np.array_equal(data["particle"], particle)
     assert temporaries(tmp_path) == []
+
+
+def test_lines_reach_a_log_file_before_the_process_ends(tmp_path):
+    """Item 8: stdout and stderr of anm-post are line-buffered even when they are files, so a log
+    shows each line as it is printed and keeps it when the process is killed."""
+    code = ("import sys, time\nfrom anm_post.cli import _line_buffered\n_line_buffered()\n"
+            "print('result line')\nprint('progress line', file=sys.stderr)\ntime.sleep(60)\n")
+    out, err = tmp_path / "out.log", tmp_path / "err.log"
+    with open(out, "w") as fo, open(err, "w") as fe:
+        proc = subprocess.Popen([sys.executable, "-c", code], stdout=fo, stderr=fe)
+        try:
+            import time
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline and not (out.read_text() and err.read_text()):
+                time.sleep(0.1)
+        finally:
+            proc.kill()
+            proc.wait()
+    assert out.read_text() == "result line\n" and err.read_text() == "progress line\n"
