@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from .errors import AnmPostError
+from .output import OutputSet, check_array_suffix, figure_format, write_text
 from .tables import read_geometry_table, psd_table, format_psd
 
 EPILOG = """examples:
@@ -46,18 +48,11 @@ def _cmd_table(args: argparse.Namespace) -> int:
         fmt = "text" if args.format == "summary" else args.format
         sys.stdout.write(format_psd(rows, fmt))
         if args.csv:
-            try:
-                Path(args.csv).write_text(format_psd(rows, "csv"))
-            except OSError as exc:
-                raise AnmPostError(f"{args.csv}: cannot write CSV (--csv): {exc.strerror}") from None
+            write_text(args.csv, format_psd(rows, "csv"), "--csv")
         return 0
     table = read_geometry_table(args.table)
     if args.csv:
-        try:
-            with open(args.csv, "w") as fh:
-                fh.write(table.to_csv())
-        except OSError as exc:
-            raise AnmPostError(f"{args.csv}: cannot write CSV (--csv): {exc.strerror}") from None
+        write_text(args.csv, table.to_csv(), "--csv")
     if args.format == "csv":
         sys.stdout.write(table.to_csv())
     elif args.format in ("markdown", "text"):
@@ -74,6 +69,8 @@ def _plane_from_args(args: argparse.Namespace, model):
     if args.center is not None or args.normal is not None:
         if args.center is None or args.normal is None or args.size is None:
             raise AnmPostError("--center, --normal and --size go together (an oblique slice)")
+        if not np.all(np.isfinite(np.asarray(args.center, float))):
+            raise AnmPostError(f"--center: must be a finite point, got {args.center}")
         n = np.asarray(args.normal, float)
         if not np.all(np.isfinite(n)) or np.linalg.norm(n) == 0:
             raise AnmPostError(f"--normal: must be a non-zero vector, got {args.normal}")
@@ -117,6 +114,7 @@ def _cmd_slice(args: argparse.Namespace) -> int:
     except AnmPostError as exc:
         raise AnmPostError(f"--shell-particles: {exc}") from None
     if args.density is not None:
+        _check_stack_memory(args, model)
         try:
             results = list(slicer.stack(args.axis, args.pixel, args.density))
         except AnmPostError as exc:
@@ -138,6 +136,7 @@ def _cmd_slice(args: argparse.Namespace) -> int:
         plane = _plane_from_args(args, model)
     except AnmPostError as exc:
         raise AnmPostError(str(exc) if str(exc).startswith("--") else f"--position/--size/--pixel: {exc}") from None
+    _check_slice_memory(plane, 1, 1, args)
     result = slicer.slice(plane)
     print(f"{model.path}: slice {result.particle.shape[1]} x {result.particle.shape[0]} pixels of {plane.pixel:g} mm; "
           f"particle area fraction {result.particle_fraction:.4f}"
@@ -149,32 +148,40 @@ def _cmd_slice(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_slice_memory(plane, kept: int, chunk: int, args: argparse.Namespace, option: str = "--pixel") -> None:
+    """Refuse up front slices whose label arrays would not fit in memory (anm_post.resources)."""
+    from .resources import check_memory, slice_memory
+    nv, nu = plane.shape
+    need = slice_memory(nu * nv, kept, chunk, png=bool(getattr(args, "png", None)),
+                        labels=bool(getattr(args, "labels", None)))
+    what = f"{kept} slice{'s' if kept > 1 else ''} of {nu} x {nv} pixels"
+    check_memory(need, what, option)
+
+
+def _check_stack_memory(args: argparse.Namespace, model) -> None:
+    from .slicing import axis_plane, stack_positions
+    k = "xyz".index(args.axis)
+    try:
+        n = len(stack_positions(0.0, float(model.box[k]), args.pixel, args.density))
+        plane = axis_plane(model, args.axis, 0.0, args.pixel)
+    except AnmPostError as exc:
+        raise AnmPostError(f"--density/--pixel: {exc}") from None
+    _check_slice_memory(plane, n, min(n, 8), args, "--pixel/--density")
+
+
 def _save_stack(results, path: str) -> None:
     p = Path(path)
     arrays = {k: np.stack([getattr(r, k) for r in results]) for k in ("particle", "layer", "owner", "sieve")}
     origins = np.array([r.plane.origin for r in results])
-    try:
-        if p.suffix == ".npz":
-            np.savez_compressed(p, origin=origins, pixel=results[0].plane.pixel, **arrays)
-        elif p.suffix in (".h5", ".hdf5"):
-            import h5py
-            with h5py.File(p, "w") as fh:
-                fh.attrs["format"] = "anm-slice-stack"
-                fh.attrs["pixel"] = results[0].plane.pixel
-                fh.create_dataset("origin", data=origins)
-                for k, a in arrays.items():
-                    fh.create_dataset(k, data=a, compression="gzip")
-        else:
-            raise AnmPostError(f"{p}: --labels must end in .npz, .h5 or .hdf5")
-    except OSError as exc:
-        raise AnmPostError(f"{p}: cannot write (--labels): {exc}") from None
+    from .output import save_arrays
+    save_arrays(p, dict(origin=origins, **arrays), dict(pixel=results[0].plane.pixel), "anm-slice-stack",
+                "--labels")
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from .plots import plot_study
-    out = args.output or str(Path(args.csv).with_suffix(".png"))
-    plot_study(args.csv, out)
-    print(out)
+    plot_study(args.csv, args.output)
+    print(_final_path(args, "output"))
     return 0
 
 
@@ -222,7 +229,10 @@ def _cmd_rdf(args: argparse.Namespace) -> int:
         raise AnmPostError(f"--spacing: must be positive, got {args.spacing}")
     if args.replicates < 2:
         raise AnmPostError(f"--replicates: at least 2 are needed for a standard error, got {args.replicates}")
+    if args.seed < 0:
+        raise AnmPostError(f"--seed: must be >= 0, got {args.seed}")
     st = prepare(model, spec)
+    _check_rdf_memory(st, spec, [spec.density], args)
     res = rdf(model, spec, setup=st)
     vol = volume_fractions(model, spec, spacing=args.spacing, replicates=args.replicates, seed=args.seed,
                            setup=st) if args.volume else None
@@ -245,6 +255,19 @@ def _cmd_rdf(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_rdf_memory(st, spec, densities, args: argparse.Namespace) -> None:
+    """Refuse up front RDF slices that would not fit in memory (16 slices labelled at once)."""
+    from .resources import check_memory, slice_memory
+    from .slicing import n_max
+    k = "xyz".index(spec.axis)
+    iu, iv = [d for d in range(3) if d != k]
+    ext = np.asarray(st.hi, float) - np.asarray(st.lo, float)
+    nu, nv = (max(1, round(float(ext[d]) / spec.pixel)) for d in (iu, iv))
+    n = max(1, int(round(max(densities) * n_max(float(ext[k]), spec.pixel))))
+    need = slice_memory(nu * nv, 1, min(n, 16), png=False, labels=False)
+    check_memory(need, f"{n} slices of {nu} x {nv} pixels (16 at a time)", "--pixel")
+
+
 def _cmd_convergence(args: argparse.Namespace) -> int:
     from .model import read_model
     from .walleffect import convergence, plot_convergence
@@ -253,7 +276,14 @@ def _cmd_convergence(args: argparse.Namespace) -> int:
     layers = [int(x) for x in _floats(args.layers, "--layers")] if args.layers else None
     model = read_model(args.model)
     _check_particle(args, model)
-    conv = convergence(model, spec, dens)
+    from .walleffect import prepare
+    if not dens or not all(0 < d <= 1 for d in dens):
+        raise AnmPostError(f"--densities: slice densities must be in (0, 1], got {args.densities!r}")
+    if layers is not None and not all(1 <= k <= spec.n_shells for k in layers):
+        raise AnmPostError(f"--layers: 1-based layers must be in 1..{spec.n_shells} (--shells), got {args.layers!r}")
+    st = prepare(model, spec)
+    _check_rdf_memory(st, spec, dens, args)
+    conv = convergence(model, spec, dens, setup=st)
     print(f"{sum(len(r.positions) for r in conv.results)} slices in {conv.results[0].seconds:.1f} s",
           file=sys.stderr)
     print("density,n_slices," + ",".join(f"g{k + 1},sd{k + 1}" for k in range(len(conv.results[0].g))))
@@ -280,14 +310,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv") from None
         if not sep:
             raise AnmPostError(f"run {item!r}: expected VALUE=SUMMARY.csv")
+    if not np.isfinite(args.scale) or args.scale == 0:
+        raise AnmPostError(f"--scale: must be a finite non-zero number, got {args.scale}")
     rows = collect(runs)
     text = sweep_markdown(rows, args.label, args.scale)
     sys.stdout.write(text)
     if args.markdown:
-        try:
-            Path(args.markdown).write_text(text)
-        except OSError as exc:
-            raise AnmPostError(f"{args.markdown}: cannot write (--markdown): {exc.strerror}") from None
+        write_text(args.markdown, text, "--markdown")
     if args.png:
         plot_sweep(rows, args.label, args.png, args.scale, shells=args.shells)
     return 0
@@ -401,15 +430,121 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# -- the one place where outputs are checked and staged and errors become messages -------------
+
+#: Output options of the subcommands: attribute -> option name (anm_post.output: checked up front,
+#: written to temporary names, renamed together when the command succeeds).
+OUTPUT_OPTIONS = {"csv": "--csv", "png": "--png", "labels": "--labels", "markdown": "--markdown",
+                  "output": "-o", "rdf_png": "--rdf-png"}
+#: Input arguments (attribute names) an output must not overwrite.
+INPUT_ARGUMENTS = ("model", "table", "csv", "runs")
+#: Options that name pictures (their suffix must be a format matplotlib writes).
+PICTURE_OPTIONS = ("png", "output", "rdf_png")
+
+
+def _inputs(args: argparse.Namespace) -> list[Path]:
+    out = []
+    for attr in INPUT_ARGUMENTS:
+        value = getattr(args, attr, None)
+        if attr == "csv" and args.command != "plot":
+            continue
+        for v in (value if isinstance(value, list) else [value]):
+            if isinstance(v, str):
+                out.append(Path(v.partition("=")[2] if attr == "runs" else v))
+    return [p for p in out if p.exists()]
+
+
+def _stage_outputs(args: argparse.Namespace, outputs: OutputSet) -> None:
+    """Check every output option up front (folder writable, suffix known, not an input file, not
+    given twice) and replace it by a temporary name of `outputs`; args._final maps it back."""
+    if args.command == "plot" and args.output is None:
+        args.output = str(Path(args.csv).with_suffix(".png"))
+    inputs = _inputs(args)
+    args._final = {}
+    seen: dict[str, str] = {}
+    for attr, option in OUTPUT_OPTIONS.items():
+        value = getattr(args, attr, None)
+        if value is None or (attr == "csv" and args.command == "plot"):
+            continue
+        path = outputs.add(value, option)
+        key = os.path.realpath(path)
+        if key in seen:
+            raise AnmPostError(f"{path}: given to both {seen[key]} and {option}; one file per output")
+        seen[key] = option
+        for source in inputs:
+            if path.exists() and os.path.samefile(path, source):
+                raise AnmPostError(f"{path}: {option} would overwrite an input file of this command")
+        if attr in PICTURE_OPTIONS:
+            figure_format(path, option)
+        if attr == "labels":
+            check_array_suffix(path, option)
+        args._final[attr] = path
+        setattr(args, attr, str(outputs.stage(path, option)))
+
+
+def _final_path(args: argparse.Namespace, attr: str) -> str:
+    return str(getattr(args, "_final", {}).get(attr, getattr(args, attr)))
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run a subcommand: outputs staged and committed as a set, every known error turned into
+    `anm-post: error: MESSAGE` on stderr and exit code 1 (never a traceback; with ANM_DEBUG=1 an
+    unexpected error shows its traceback)."""
+    debug = os.environ.get("ANM_DEBUG", "") not in ("", "0")
+    staged: dict[str, str] = {}
+    try:
+        with OutputSet() as outputs:
+            try:
+                _stage_outputs(args, outputs)
+                staged = {str(tmp): str(final) for tmp, final, _ in outputs._staged}
+                return args.func(args)
+            finally:
+                sys.stdout.flush()
+    except AnmPostError as exc:
+        message, code = str(exc), 1
+    except MemoryError:
+        message, code = ("out of memory; use a larger --pixel, a smaller --density or fewer slices "
+                         "(no output was written)"), 1
+    except KeyboardInterrupt:
+        message, code = "interrupted (no output was written)", 130
+    except BrokenPipeError:
+        # the reader of stdout went away (`anm-post ... | head`): stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return 1
+    except OSError as exc:
+        if debug:
+            raise
+        where = f"{exc.filename}: " if exc.filename else ""
+        message, code = f"{where}{exc.strerror or exc}", 1
+    except Exception as exc:  # an internal error: a short message, the traceback only on request
+        if debug:
+            raise
+        message, code = (f"internal error ({type(exc).__name__}: {exc}); please report it with the command "
+                         "line (ANM_DEBUG=1 shows the traceback)"), 1
+    for tmp, final in staged.items():
+        message = message.replace(tmp, final)
+    print(f"anm-post: error: {message}", file=sys.stderr, flush=True)
+    return code
+
+
+def _line_buffered() -> None:
+    """Progress and result lines reach a log file as they are printed (not block-buffered)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(line_buffering=True)
+        except (AttributeError, ValueError):  # replaced streams (tests) may not support it
+            pass
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (1 with a message on bad input, 2 for usage errors)."""
+    _line_buffered()
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except AnmPostError as exc:
-        print(f"anm-post: error: {exc}", file=sys.stderr)
-        return 1
+    return _run(args)
 
 
 if __name__ == "__main__":

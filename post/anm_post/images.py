@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AnmPostError
 from .model import Model
 from .slicing import SliceResult
 
@@ -57,10 +56,9 @@ def save_slice_png(result: SliceResult, model: Model, path: str | Path, nlayer: 
     handles.append(Patch(facecolor=MATRIX_COLOUR, edgecolor="0.6", label="matrix"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     fig.tight_layout()
+    from .output import save_figure
     try:
-        fig.savefig(path, dpi=dpi, bbox_inches="tight")
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot write PNG ({exc})") from None
+        save_figure(fig, path, "--png", dpi=dpi, bbox_inches="tight")
     finally:
         plt.close(fig)
     return path

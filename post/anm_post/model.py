@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import AnmPostError
+from .validate import FORMAT_VERSIONS, text, validate_model
 
 #: Datasets every model file must hold.
 REQUIRED = (
@@ -71,60 +72,92 @@ class Model:
 
 
 def read_model(path: str | Path) -> Model:
-    """Read a model file; raises AnmPostError naming the file and dataset on any problem."""
+    """Read a model file and validate it (anm_post.validate.validate_model); raises AnmPostError
+    naming the file, the dataset and the first bad particle on any problem. Strings may be fixed-
+    or variable-length (any HDF5 writer)."""
     import h5py
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise AnmPostError(f"{path}: model file not found")
+    if not path.is_file():
+        raise AnmPostError(f"{path}: not a file (a model file written by `anm run` is expected)")
     try:
         fh = h5py.File(path, "r")
     except OSError as exc:
-        raise AnmPostError(f"{path}: cannot read as HDF5 ({exc})") from None
+        reason = "not an HDF5 file" if "signature" in str(exc) else str(exc)
+        raise AnmPostError(f"{path}: cannot read as HDF5 ({reason})") from None
     with fh:
-        if fh.attrs.get("format") not in ("anm-model", b"anm-model"):
-            raise AnmPostError(f"{path}: not an Anm model file (root attribute 'format' is not 'anm-model')")
+        if "format" not in fh.attrs:
+            raise AnmPostError(f"{path}: not an Anm model file (no root attribute 'format')")
+        try:
+            fmt = text(fh.attrs["format"], f"{path}: root attribute 'format'")
+        except AnmPostError:
+            raise AnmPostError(f"{path}: not an Anm model file (root attribute 'format' is not text)") from None
+        if fmt != "anm-model":
+            shown = fmt if len(fmt) <= 40 and fmt.isprintable() else "other text"
+            raise AnmPostError(f"{path}: not an Anm model file (format = {shown!r}, expected 'anm-model')")
+        version = fh.attrs.get("format_version")
+        try:
+            version = int(np.asarray(version).reshape(-1)[0]) if version is not None else None
+        except (TypeError, ValueError, IndexError):
+            version = -1
+        if version is None:
+            raise AnmPostError(f"{path}: root attribute 'format_version' missing")
+        if version not in FORMAT_VERSIONS:
+            raise AnmPostError(f"{path}: unknown format_version {version} (this anm-post reads "
+                               f"{', '.join(map(str, FORMAT_VERSIONS))})")
         for name in REQUIRED:
             if name not in fh:
                 raise AnmPostError(f"{path}::/{name}: dataset missing")
+        name = "box/length"
         try:
-            box = np.asarray(fh["box/length"][()], dtype=np.float64)
-            periodic = bool(int(fh["box"].attrs.get("periodic", 1)))
-            coeffs = np.asarray(fh["shapes/coeffs"][()], dtype=np.float64)
-            snmax = np.asarray(fh["shapes/nmax"][()], dtype=np.int32)
-            names = [n.decode() if isinstance(n, bytes) else str(n) for n in fh["shapes/name"][()]]
+            box = np.asarray(fh[name][()], dtype=np.float64)
+            periodic = bool(int(np.asarray(fh["box"].attrs.get("periodic", 1)).reshape(-1)[0]))
+            name = "shapes/coeffs"
+            coeffs = np.asarray(fh[name][()], dtype=np.float64)
+            name = "shapes/nmax"
+            snmax = np.asarray(fh[name][()], dtype=np.int32)
+            name = "shapes/name"
+            names = [text(n, f"{path}::/shapes/name[{k}]") for k, n in enumerate(np.asarray(fh[name][()]).reshape(-1))]
             p = fh["particles"]
+            name = "particles/shape"
             shape = np.asarray(p["shape"][()], dtype=np.int32)
+            name = "particles/center"
             center = np.asarray(p["center"][()], dtype=np.float64).reshape(-1, 3)
+            name = "particles/rotation"
             rotation = np.asarray(p["rotation"][()], dtype=np.float64).reshape(-1, 3, 3)
+            name = "particles/scale"
             scale = np.asarray(p["scale"][()], dtype=np.float64)
+            name = "particles/nmax"
             nmax = np.asarray(p["nmax"][()], dtype=np.int32)
+            name = "particles/sieve"
             sieve = np.asarray(p["sieve"][()], dtype=np.int32)
+            name = "particles/shell_thickness"
             if "shell_thickness" in p:
                 shells = np.asarray(p["shell_thickness"][()], dtype=np.float64).reshape(shape.size, -1)
             else:
                 shells = np.zeros((shape.size, 0))
-            sieves = {k: np.asarray(fh[f"sieves/{k}"][()]) for k in
-                      ("min_width", "max_width", "target_fraction", "achieved_fraction", "count")}
-            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in fh["run"].attrs.items()} \
-                if "run" in fh else {}
-        except (KeyError, ValueError, TypeError) as exc:
-            raise AnmPostError(f"{path}: malformed model file ({exc})") from None
-    npart = shape.size
-    checks = {
-        "box/length": box.shape == (3,) and bool(np.all(box > 0)),
-        "shapes/coeffs": coeffs.ndim == 3 and coeffs.shape[2] == 2 and coeffs.shape[0] == snmax.size,
-        "shapes/nmax": bool(np.all((snmax + 1) ** 2 <= coeffs.shape[1])) if coeffs.ndim == 3 else False,
-        "particles/shape": bool(np.all((shape >= 0) & (shape < snmax.size))),
-        "particles/center": center.shape == (npart, 3),
-        "particles/rotation": rotation.shape == (npart, 3, 3),
-        "particles/scale": scale.shape == (npart,) and bool(np.all(scale > 0)),
-        "particles/nmax": nmax.shape == (npart,) and bool(np.all(nmax >= 0)),
-        "particles/sieve": sieve.shape == (npart,),
-    }
-    for name, ok in checks.items():
-        if not ok:
-            raise AnmPostError(f"{path}::/{name}: wrong shape or values")
-    return Model(path=path, box=box, periodic=periodic, shape_coeffs=coeffs, shape_nmax=snmax, shape_names=names,
-                 shape=shape, center=center, rotation=rotation, scale=scale, nmax=nmax, sieve=sieve,
-                 shell_thickness=shells, sieves=sieves, attrs=attrs)
+            sieves = {}
+            for k in ("min_width", "max_width", "target_fraction", "achieved_fraction", "count"):
+                name = f"sieves/{k}"
+                sieves[k] = np.asarray(fh[name][()])
+            name = "run"
+            attrs = {}
+            if "run" in fh:
+                for k, v in fh["run"].attrs.items():
+                    attrs[k] = text(v, f"{path}::/run attribute {k!r}") \
+                        if isinstance(v, (str, bytes, np.bytes_)) else v
+                for k in ("namelist", "resolved_namelist"):
+                    if k in fh["run"] and isinstance(fh["run"][k], h5py.Dataset):
+                        attrs[k] = text(fh["run"][k][()], f"{path}::/run/{k}")
+        except AnmPostError:
+            raise
+        except (KeyError, ValueError, TypeError, OSError) as exc:
+            raise AnmPostError(f"{path}::/{name}: malformed ({exc})") from None
+    attrs["format_version"] = version
+    model = Model(path=path, box=box, periodic=periodic, shape_coeffs=coeffs, shape_nmax=snmax, shape_names=names,
+                  shape=shape, center=center, rotation=rotation, scale=scale, nmax=nmax, sieve=sieve,
+                  shell_thickness=shells, sieves=sieves, attrs=attrs)
+    validate_model(model)
+    return model

@@ -3,7 +3,6 @@
 nbox,d_overlap (overlap distance against the number of boxes)."""
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +20,9 @@ STUDIES = {
 
 def read_study_csv(path: str | Path) -> tuple[str, dict[str, np.ndarray]]:
     """Read a study CSV; returns (kind, columns). Errors name the file and line."""
+    from .textio import read_csv_rows
     path = Path(path)
-    try:
-        with open(path, newline="") as fh:
-            rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot read ({exc.strerror})") from None
+    rows = read_csv_rows(path, "a study CSV of `anm study next|nbox`")
     if not rows:
         raise AnmPostError(f"{path}: empty file")
     header = [h.strip() for h in rows[0]]
@@ -69,10 +65,9 @@ def plot_study(csv_path: str | Path, png_path: str | Path) -> Path:
     ax.legend()
     fig.tight_layout()
     png_path = Path(png_path)
+    from .output import save_figure
     try:
-        fig.savefig(png_path, dpi=150)
-    except OSError as exc:
-        raise AnmPostError(f"{png_path}: cannot write PNG ({exc})") from None
+        save_figure(fig, png_path, "-o", dpi=150)
     finally:
         plt.close(fig)
     return png_path

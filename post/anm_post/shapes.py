@@ -12,11 +12,8 @@ def read_shape_coefficients(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarr
     Raises AnmPostError naming the file and line for a missing file, a wrong field count, a
     non-numeric field, or coefficients out of the NIST order (n = 0.., m = n..-n).
     """
-    try:
-        with open(path) as fh:
-            lines = fh.read().splitlines()
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot read shape file ({exc.strerror})") from None
+    from .textio import read_text
+    lines = read_text(path, "a shape coefficient file").splitlines()
     n_list, m_list, a_list = [], [], []
     n_exp, m_exp = 0, 0
     for lineno, line in enumerate(lines, start=1):

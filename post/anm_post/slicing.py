@@ -163,22 +163,8 @@ class SliceResult:
         meta = dict(origin=np.asarray(self.plane.origin), u=np.asarray(self.plane.u), v=np.asarray(self.plane.v),
                     size=np.asarray(self.plane.size), pixel=np.asarray(self.plane.pixel))
         data = dict(particle=self.particle, layer=self.layer, owner=self.owner, sieve=self.sieve)
-        try:
-            if path.suffix == ".npz":
-                np.savez_compressed(path, **data, **meta)
-            elif path.suffix in (".h5", ".hdf5"):
-                import h5py
-                with h5py.File(path, "w") as fh:
-                    fh.attrs["format"] = "anm-slice"
-                    for k, val in data.items():
-                        fh.create_dataset(k, data=val, compression="gzip")
-                    for k, val in meta.items():
-                        fh.attrs[k] = val
-            else:
-                raise AnmPostError(f"{path}: label file must end in .npz, .h5 or .hdf5")
-        except OSError as exc:
-            raise AnmPostError(f"{path}: cannot write ({exc})") from None
-        return path
+        from .output import save_arrays
+        return save_arrays(path, data, meta, "anm-slice", "--labels")
 
 
 class Slicer:

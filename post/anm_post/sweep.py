@@ -10,7 +10,6 @@ Library API:
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -35,12 +34,13 @@ class SweepRow:
 def read_summary(path: str | Path) -> tuple[np.ndarray, np.ndarray, float, int, float]:
     """(achieved per sieve, count per sieve, total achieved, total count, total shell fraction) of
     a model-summary.csv written by `anm run`."""
+    from .textio import read_csv_rows
     path = Path(path)
-    try:
-        with open(path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot read ({exc.strerror})") from None
+    table = read_csv_rows(path, "a model-summary.csv of `anm run`")
+    if not table:
+        raise AnmPostError(f"{path}: empty file, not a model summary of `anm run`")
+    header = table[0]
+    rows = [dict(zip(header, r)) for r in table[1:] if r]
     try:
         sieves = [r for r in rows if r["sieve"] != "total"]
         total = next(r for r in rows if r["sieve"] == "total")
@@ -59,6 +59,13 @@ def collect(runs: Sequence[tuple[float, str | Path]]) -> list[SweepRow]:
         out.append(SweepRow(float(value), a, c, t, n, s))
     if not out:
         raise AnmPostError("no runs to collect")
+    nsieve = {len(r.achieved) for r in out}
+    if len(nsieve) > 1:
+        raise AnmPostError(f"the runs have different numbers of sieves ({', '.join(map(str, sorted(nsieve)))}): "
+                           "a sweep compares runs of one grading")
+    bad = [r.value for r in out if not np.isfinite(r.value)]
+    if bad:
+        raise AnmPostError(f"swept value {bad[0]} is not a finite number")
     return out
 
 
@@ -100,10 +107,9 @@ def plot_sweep(rows: Sequence[SweepRow], label: str, path: str | Path, scale: fl
         ax.set_xlabel(label)
     fig.tight_layout()
     path = Path(path)
+    from .output import save_figure
     try:
-        fig.savefig(path, dpi=150)
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot write PNG (--png): {exc}") from None
+        save_figure(fig, path, "--png", dpi=150)
     finally:
         plt.close(fig)
     return path

@@ -160,15 +160,13 @@ class VolumeResult:
 
 
 def _write_csv(path: str | Path, rows: list[dict], option: str) -> Path:
+    from .output import atomic_open
     path = Path(path)
-    try:
-        with open(path, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot write ({option}): {exc.strerror}") from None
+    with atomic_open(path, option, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
     return path
 
 
@@ -554,14 +552,11 @@ def _figure():
 
 
 def _save(fig, plt, path: str | Path, option: str) -> Path:
-    path = Path(path)
+    from .output import save_figure
     try:
-        fig.savefig(path, dpi=150)
-    except OSError as exc:
-        raise AnmPostError(f"{path}: cannot write PNG ({option}): {exc}") from None
+        return save_figure(fig, path, option, dpi=150)
     finally:
         plt.close(fig)
-    return path
 
 
 def plot_rdf(res: RdfResult, path: str | Path, volume: VolumeResult | None = None, title: str = "") -> Path:

@@ -11,7 +11,7 @@ from math import pi, sqrt
 import numpy as np
 import pytest
 
-from synth import random_rotation, random_shape, write_model
+from synth import random_rotation, random_shape, write_model, ylm
 from anm_post import Plane, read_model
 from anm_post.cli import main
 from anm_post.errors import AnmPostError
@@ -67,14 +67,39 @@ def exact_g(t_in, t_out, big, small, number, allowed):
     return np.array(out), phi_b
 
 
+def closed_form_ylm(n: int, m: int, theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Textbook closed forms of the orthonormal Y_n^m (Condon-Shortley phase), n <= 3, m >= 0."""
+    c, s, e = np.cos(theta), np.sin(theta), np.exp(1j * m * phi)
+    table = {
+        (0, 0): 0.5 * sqrt(1 / pi) + 0 * c,
+        (1, 0): 0.5 * sqrt(3 / pi) * c,
+        (1, 1): -0.5 * sqrt(3 / (2 * pi)) * s,
+        (2, 0): 0.25 * sqrt(5 / pi) * (3 * c * c - 1),
+        (2, 1): -0.5 * sqrt(15 / (2 * pi)) * s * c,
+        (2, 2): 0.25 * sqrt(15 / (2 * pi)) * s * s,
+        (3, 0): 0.25 * sqrt(7 / pi) * (5 * c ** 3 - 3 * c),
+        (3, 1): -0.125 * sqrt(21 / pi) * s * (5 * c * c - 1),
+        (3, 2): 0.25 * sqrt(105 / (2 * pi)) * s * s * c,
+        (3, 3): -0.125 * sqrt(35 / pi) * s ** 3,
+    }
+    return table[(n, m)] * e
+
+
 def test_legendre_and_form_radius_match_kernels():
-    from scipy.special import sph_harm_y
+    # the reference Y_n^m (synth.ylm: unnormalised recurrence times the factorial norm, no anm code)
+    # is checked first against textbook closed forms, then legendre_table against it up to n = 12
     x = np.linspace(-1, 1, 9)
-    p = legendre_table(12, x)
     th = np.arccos(x)
+    ph = np.linspace(0.3, 5.9, 9)
+    for n in range(4):
+        for m in range(n + 1):
+            assert np.allclose(ylm(n, m, th, ph), closed_form_ylm(n, m, th, ph), atol=1e-14)
+    # a known value: Y_12^0 at the pole is sqrt(25 / (4 pi))
+    assert abs(ylm(12, 0, np.array([0.0]), np.array([0.0]))[0] - sqrt(25 / (4 * pi))) < 1e-13
+    p = legendre_table(12, x)
     for n in range(13):
         for m in range(n + 1):
-            assert np.allclose(p[n, m], sph_harm_y(n, m, th, 0 * th).real, atol=1e-13)
+            assert np.allclose(p[n, m], ylm(n, m, th, 0 * th).real, atol=1e-13)
     from anm_post import kernels
     rng = np.random.default_rng(0)
     c = random_shape(rng, 6, 1.0, 0.2)[None]
