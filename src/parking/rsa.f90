@@ -26,6 +26,12 @@ module anm_parking_rsa
 
    public :: park_rsa, rsa_params_type, sieve_result_type, run_state_type
 
+   !> Void placement: the void grid advances (blocks the particles parked since its last advance,
+   !> compacts when a quarter of its free list is stale) only after every `void_epoch` particles
+   !> (streams) of a sieve, and batches end at these boundaries. Every attempt of an epoch thus
+   !> draws its centre from the same grid, whatever the batch sizes and the number of threads.
+   integer, parameter :: void_epoch = 64
+
    !> What the strategy needs of the run besides the per-sieve attempt parameters.
    type :: rsa_params_type
       !> Particles that may exhaust their attempts before a sieve ends.
@@ -117,7 +123,7 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(void_grid_type) :: vg
       type(batch_type) :: bt
-      integer :: k, j, batch_now
+      integer :: k, j, batch_now, np_blocked
       integer(i8) :: tp1, t1
       real(wp) :: r_in
       r_in = 0.0_wp
@@ -126,20 +132,24 @@ contains
          if (allocated(error)) return
       end if
       if (rp%void) call start_void(vg, pk, ap, r_in)
+      np_blocked = pk%np
       do while (st%res%vol < st%target .and. .not. st%done)
          if (rp%lazy) then
             call build_ahead(pk, ks, ap, rp, st, run%batch, error)
             if (allocated(error)) return
          end if
          batch_now = run%batch
+         ! void placement: a batch never crosses an epoch boundary (see void_epoch)
+         if (rp%void) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
          call system_clock(tp1)
          call bt%speculate(batch_now, ap, pk, vg, st%nstream)
          call system_clock(t1)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
-         if (rp%void) then
-            do j = bt%np_frozen + 1, pk%np
+         if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
+            do j = np_blocked + 1, pk%np
                call block_particle(vg, pk, j)
             end do
+            np_blocked = pk%np
             if (vg%stale > vg%nfree / 4) call vg%compact()
             if (vg%nfree == 0) st%done = .true.
          end if
