@@ -10,6 +10,7 @@ program tester
    use test_geometry, only: collect_geometry
    use test_io, only: collect_io
    use test_parking, only: collect_parking
+   use test_packing, only: collect_packing
    use test_shells, only: collect_shells
    use test_contact, only: collect_contact
    use test_slicing, only: collect_slicing
@@ -25,6 +26,7 @@ program tester
    suites = [new_testsuite("core", collect_core), new_testsuite("sh", collect_sh), &
              new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
              new_testsuite("io", collect_io), new_testsuite("parking", collect_parking), &
+             new_testsuite("packing", collect_packing), &
              new_testsuite("shells", collect_shells), &
              new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing), &
              new_testsuite("audit", collect_audit), new_testsuite("cli", collect_cli), &

@@ -42,6 +42,8 @@ contains
               new_unittest("1 and 2 threads give the same model", test_threads), &
               new_unittest("batches give the serial model (dense spheres, shapes with shells)", test_batches), &
               new_unittest("void-targeted placement: valid model, fewer wasted attempts", test_void), &
+              new_unittest("void placement: max_batch=1 and 2 threads with large batches give the same model", &
+                           test_void_batches), &
               new_unittest("max_failures: the thesis' model is a prefix, more particles follow", test_max_failures), &
               new_unittest("rounding of a sieve moves to the next: total within half a grain", test_carry)]
    end subroutine collect_parking
@@ -410,6 +412,35 @@ contains
       if (allocated(error)) return
       call check(error, v%achieved_fraction(1) >= u%achieved_fraction(1), "void placement packed less")
    end subroutine test_void
+
+   !> Void placement does not depend on batching: the serial algorithm (one thread, max_batch=1)
+   !> and two threads with batches as large as they grow give the same model (two sieves, so
+   !> that the second starts from a grid blocked by the first; walls and periodic).
+   subroutine test_void_batches(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: nthreads, i
+      character(len=*), parameter :: sieves = "&sieves nsieve = 2, min_width = 2, 1, max_width = 2.4, 1.2, "// &
+         "fraction = 0.3, 0.1, source = 'sphere', 'sphere', order = 0, 0 /"//new_line("a")// &
+         "&parking max_locations = 300, placement = 'void' /"
+      character(len=60), parameter :: boxes(2) = [character(len=60) :: "&box length = 9, 9, 9 /", &
+                                                   "&box length = 9, 9, 9, periodic = .false. /"]
+      nthreads = omp_get_max_threads()
+      do i = 1, 2
+         call omp_set_num_threads(1)
+         call run_nml("void_serial.nml", trim(boxes(i))//new_line("a")//sieves, a, error, max_batch=1)
+         call omp_set_num_threads(2)
+         if (.not. allocated(error)) call run_nml("void_batched.nml", trim(boxes(i))//new_line("a")//sieves, b, error)
+         call omp_set_num_threads(nthreads)
+         if (allocated(error)) return
+         print '(a,i0,a,i0,a,2i6)', "        case ", i, ": ", a%np, " particles, per sieve", a%count
+         call check(error, a%np == b%np .and. a%attempts == b%attempts, "particle or attempt counts differ")
+         if (allocated(error)) return
+         call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. &
+                    all(a%scale == b%scale), "the batched void model differs from the serial one")
+         if (allocated(error)) return
+      end do
+   end subroutine test_void_batches
 
    subroutine test_max_failures(error)
       type(error_type), allocatable, intent(out) :: error

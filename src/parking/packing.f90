@@ -1,0 +1,378 @@
+!> A packing: the parked particles (centre, rotation, scale, kind, sieve), their kinds and a cell
+!> list over them, with what every placement strategy needs: add, remove and move a particle,
+!> query the particles near a sphere, and test whether a candidate pose fits (no overlap with the
+!> walls or any parked particle, as the shell mode says).
+!>
+!> Ids. Particles are 1..np. `remove(i)` moves the last particle to id i. The cell list stores
+!> records (one per insertion): `remove` and `move` retire the particle's record (it is skipped
+!> from then on) and `move` inserts a new one; `compact` rebuilds the cell list from the live
+!> particles (call it when many records are retired; RSA never retires any).
+!>
+!> Marks. `mark()` is the number of records so far; `fits(..., since=m)` tests only particles
+!> added or moved after mark m (the phase-2 re-check of a batch). A mark is invalid after `compact`.
+!>
+!> Usage:
+!>     call new_packing(pk, params, kinds)          ! kinds moved in (pk%kinds)
+!>     if (pk%fits(k, x, r, sc, scratch)) call pk%add(k, x, r, sc, sieve)
+!>     call pk%move(i, x2, r2);  call pk%remove(i)
+!>     call pk%neighbours(x, rho, ids, shifts, n)
+module anm_parking_packing
+   use anm_core_kinds, only: wp
+   use anm_contact_overlap, only: contact_params_type, bodies_overlap, body_crosses_walls
+   use anm_parking_config, only: shell_mode
+   use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
+   use anm_parking_kinds, only: particle_kind_type
+   implicit none
+   private
+
+   public :: packing_type, packing_params_type, fit_scratch_type, new_packing
+
+   !> What a packing needs of the run (filled by the driver).
+   type :: packing_params_type
+      !> Box edges (mm).
+      real(wp) :: box(3) = 1.0_wp
+      !> Periodic boundaries (else walls).
+      logical :: periodic = .true.
+      !> Smallest bounding radius expected (mm; sizes the cell list).
+      real(wp) :: rho_min = 1.0_wp
+      !> Shell layers (0: none) and shell mode (`shell_mode`).
+      integer :: nlayer = 0
+      integer :: mode = shell_mode%exclude
+      !> Contact test parameters.
+      type(contact_params_type) :: contact
+   end type packing_params_type
+
+   !> Scratch of one thread for `fits` and `neighbours` (candidate ids and image shifts).
+   type :: fit_scratch_type
+      integer, allocatable :: cand(:)
+      real(wp), allocatable :: shift(:, :)
+   end type fit_scratch_type
+
+   !> The parked particles.
+   type :: packing_type
+      !> Parameters.
+      type(packing_params_type) :: p
+      !> Kinds (built by the caller before a particle of the kind is added).
+      type(particle_kind_type), allocatable :: kinds(:)
+      !> Number of particles.
+      integer :: np = 0
+      !> Centre (3, :), rotation body to world (3, 3, :), scale, bounding radius (mm).
+      real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:)
+      !> Kind and sieve of each particle.
+      integer, allocatable :: kind_of(:), sieve(:)
+      !> Cell-list records: inserted so far, retired, record of each particle, particle of each
+      !> record (0: retired).
+      integer :: nrecord = 0, ndead = 0
+      integer, allocatable :: record(:), owner(:)
+      type(cell_list_type) :: cl
+   contains
+      !> Add a particle.
+      procedure :: add
+      !> Remove a particle (the last one takes its id).
+      procedure :: remove
+      !> Move a particle to a new pose.
+      procedure :: move
+      !> Rebuild the cell list from the live particles.
+      procedure :: compact
+      !> Number of cell-list records so far (for `fits(..., since=)`).
+      procedure :: mark
+      !> Particles whose bounding spheres meet a sphere.
+      procedure :: neighbours
+      !> Whether a candidate pose overlaps nothing.
+      procedure :: fits
+   end type packing_type
+
+   !> Initial capacity (particles).
+   integer, parameter :: initial_capacity = 4096
+
+contains
+
+   !> An empty packing; `kinds` is moved into it.
+   subroutine new_packing(pk, params, kinds)
+      !> Packing.
+      type(packing_type), intent(out) :: pk
+      !> Parameters.
+      type(packing_params_type), intent(in) :: params
+      !> Kinds (deallocated on return).
+      type(particle_kind_type), allocatable, intent(inout) :: kinds(:)
+      integer :: n
+      pk%p = params
+      call move_alloc(kinds, pk%kinds)
+      n = initial_capacity
+      call new_cell_list(pk%cl, params%box, params%periodic, params%rho_min, capacity=n)
+      allocate (pk%center(3, n), pk%rot(3, 3, n), pk%scale(n), pk%rho(n), pk%sieve(n), pk%kind_of(n))
+      allocate (pk%record(n), pk%owner(n))
+   end subroutine new_packing
+
+   !> Add a particle of kind kn at centre x (inside the box), rotation rr, scale sc; its id is np.
+   subroutine add(self, kn, x, rr, sc, sieve)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Kind (built).
+      integer, intent(in) :: kn
+      !> Centre (mm), rotation (body to world), scale.
+      real(wp), intent(in) :: x(3), rr(3, 3), sc
+      !> Sieve.
+      integer, intent(in) :: sieve
+      integer :: np
+      if (self%np == size(self%scale)) call grow(self)
+      self%np = self%np + 1
+      np = self%np
+      self%center(:, np) = x
+      self%rot(:, :, np) = rr
+      self%scale(np) = sc
+      self%rho(np) = sc * self%kinds(kn)%r_out
+      self%sieve(np) = sieve
+      self%kind_of(np) = kn
+      call insert_record(self, np)
+   end subroutine add
+
+   !> Insert a new cell-list record for particle i.
+   subroutine insert_record(self, i)
+      type(packing_type), intent(inout) :: self
+      integer, intent(in) :: i
+      integer, allocatable :: o2(:)
+      if (self%nrecord == size(self%owner)) then
+         allocate (o2(2 * size(self%owner)))
+         o2(:self%nrecord) = self%owner(:self%nrecord)
+         call move_alloc(o2, self%owner)
+      end if
+      self%nrecord = self%nrecord + 1
+      self%owner(self%nrecord) = i
+      self%record(i) = self%nrecord
+      call self%cl%insert(self%nrecord, self%center(:, i), self%rho(i), &
+                          rin=self%scale(i) * self%kinds(self%kind_of(i))%r_in_parked)
+   end subroutine insert_record
+
+   !> Remove particle i; the last particle takes id i.
+   subroutine remove(self, i)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Particle (1..np).
+      integer, intent(in) :: i
+      integer :: last
+      last = self%np
+      self%owner(self%record(i)) = 0
+      self%ndead = self%ndead + 1
+      if (i /= last) then
+         self%center(:, i) = self%center(:, last)
+         self%rot(:, :, i) = self%rot(:, :, last)
+         self%scale(i) = self%scale(last)
+         self%rho(i) = self%rho(last)
+         self%sieve(i) = self%sieve(last)
+         self%kind_of(i) = self%kind_of(last)
+         self%record(i) = self%record(last)
+         self%owner(self%record(i)) = i
+      end if
+      self%np = last - 1
+   end subroutine remove
+
+   !> Move particle i to centre x (inside the box) and rotation rr (and scale sc when given).
+   subroutine move(self, i, x, rr, sc)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Particle (1..np).
+      integer, intent(in) :: i
+      !> New centre (mm) and rotation.
+      real(wp), intent(in) :: x(3), rr(3, 3)
+      !> New scale.
+      real(wp), intent(in), optional :: sc
+      self%owner(self%record(i)) = 0
+      self%ndead = self%ndead + 1
+      self%center(:, i) = x
+      self%rot(:, :, i) = rr
+      if (present(sc)) then
+         self%scale(i) = sc
+         self%rho(i) = sc * self%kinds(self%kind_of(i))%r_out
+      end if
+      call insert_record(self, i)
+   end subroutine move
+
+   !> Rebuild the cell list from the live particles (record i for particle i; marks are reset).
+   subroutine compact(self)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      integer :: i
+      call new_cell_list(self%cl, self%p%box, self%p%periodic, self%p%rho_min, capacity=max(initial_capacity, self%np))
+      self%nrecord = 0
+      self%ndead = 0
+      do i = 1, self%np
+         call insert_record(self, i)
+      end do
+   end subroutine compact
+
+   !> Number of cell-list records so far.
+   pure integer function mark(self) result(m)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      m = self%nrecord
+   end function mark
+
+   !> The particles whose bounding spheres meet the sphere (x, rho): ids(1:n), with image shifts
+   !> shifts(:, 1:n) (the image of particle ids(k) meeting the sphere has centre
+   !> center(:, ids(k)) + shifts(:, k)).
+   subroutine neighbours(self, x, rho, ids, shifts, n)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Centre (inside the box) and radius of the sphere (mm).
+      real(wp), intent(in) :: x(3), rho
+      !> Particle ids (grown as needed).
+      integer, allocatable, intent(inout) :: ids(:)
+      !> Image shifts (3, :) (grown as needed).
+      real(wp), allocatable, intent(inout) :: shifts(:, :)
+      !> Number of particles.
+      integer, intent(out) :: n
+      integer :: ncand, i, j
+      logical :: hit
+      call self%cl%neighbours(x, rho, ids, shifts, ncand, hit)
+      n = 0
+      do i = 1, ncand
+         j = self%owner(ids(i))
+         if (j == 0) cycle
+         ! the cell list's radii are rounded up: the exact test
+         if (sum((self%center(:, j) + shifts(:, i) - x)**2) >= (rho + self%rho(j))**2) cycle
+         n = n + 1
+         ids(n) = j
+         shifts(:, n) = shifts(:, i)
+      end do
+   end subroutine neighbours
+
+   !> No overlap of a particle of kind kn at pose (x, rr, sc) with the walls (non-periodic) or any
+   !> parked particle, as the shell mode says. With `since` (> 0), only the particles added or
+   !> moved after that mark are tested, and the walls are not.
+   logical function fits(self, kn, x, rr, sc, scratch, since) result(ok)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Kind (built).
+      integer, intent(in) :: kn
+      !> Centre (inside the box), rotation, scale.
+      real(wp), intent(in) :: x(3), rr(3, 3), sc
+      !> The calling thread's scratch.
+      type(fit_scratch_type), intent(inout) :: scratch
+      !> Mark (`mark()`) after which particles are tested (default 0: all).
+      integer, intent(in), optional :: since
+      integer :: i, j, ncand, ii, jmin
+      real(wp) :: xj(3)
+      logical :: hit
+      integer, allocatable :: order(:)
+      ok = .false.
+      jmin = 0
+      if (present(since)) jmin = since
+      associate (p => self%p, kq => self%kinds(kn))
+         if (.not. p%periodic .and. jmin == 0) then
+            if (p%nlayer > 0 .and. p%mode == shell_mode%exclude) then
+               if (body_crosses_walls(kq%shell_body, x, rr, sc, p%box)) return
+            else
+               if (body_crosses_walls(kq%body, x, rr, sc, p%box)) return
+            end if
+         end if
+         if (self%ndead == 0) then
+            call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, rin=sc * kq%r_in_query, &
+                                    jmin=jmin)
+            if (hit) return
+         else
+            ! a certain overlap may be a retired record: no shortcut
+            call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, jmin=jmin)
+         end if
+         call live_candidates(self, scratch%cand, scratch%shift, ncand)
+         call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order)
+         do ii = 1, ncand
+            i = order(ii)
+            j = scratch%cand(i)
+            xj = self%center(:, j) + scratch%shift(:, i)
+            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
+               if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
+                  if (bodies_overlap(kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+               else if (p%mode == shell_mode%exclude) then
+                  if (bodies_overlap(kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+               else
+                  if (bodies_overlap(kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (bodies_overlap(kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+               end if
+            end associate
+         end do
+      end associate
+      ok = .true.
+   end function fits
+
+   !> Candidate records to particle ids, retired records dropped (order kept).
+   pure subroutine live_candidates(self, cnd, shf, ncand)
+      type(packing_type), intent(in) :: self
+      integer, intent(inout) :: cnd(:)
+      real(wp), intent(inout) :: shf(:, :)
+      integer, intent(inout) :: ncand
+      integer :: i, n, j
+      n = 0
+      do i = 1, ncand
+         j = self%owner(cnd(i))
+         if (j == 0) cycle
+         n = n + 1
+         cnd(n) = j
+         shf(:, n) = shf(:, i)
+      end do
+      ncand = n
+   end subroutine live_candidates
+
+   !> The order in which to test the candidates: the most likely overlaps first, so that an
+   !> attempt that fails usually fails at its first exact test. The key is where the centre
+   !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1).
+   !> Short lists are sorted (insertion sort, stable); long ones are kept in their order.
+   pure subroutine likely_first(self, kn, x, sc, cnd, shf, ncand, order)
+      type(packing_type), intent(in) :: self
+      integer, intent(in) :: kn, ncand
+      real(wp), intent(in) :: x(3), sc
+      integer, intent(in) :: cnd(:)
+      real(wp), intent(in) :: shf(:, :)
+      integer, allocatable, intent(out) :: order(:)
+      integer, parameter :: max_sorted = 64
+      real(wp) :: key(max_sorted), kk, r_in, r_out
+      integer :: i, m, j, oi
+      allocate (order(ncand))
+      do i = 1, ncand
+         order(i) = i
+      end do
+      if (ncand < 2 .or. ncand > max_sorted) return
+      do i = 1, ncand
+         j = cnd(i)
+         r_in = sc * self%kinds(kn)%r_in_query + self%scale(j) * self%kinds(self%kind_of(j))%r_in_parked
+         r_out = sc * self%kinds(kn)%r_out + self%rho(j)
+         key(i) = (norm2(self%center(:, j) + shf(:, i) - x) - r_in) / max(r_out - r_in, tiny(1.0_wp))
+      end do
+      do i = 2, ncand
+         oi = order(i)
+         kk = key(oi)
+         m = i - 1
+         do while (m >= 1)
+            if (key(order(m)) <= kk) exit
+            order(m + 1) = order(m)
+            m = m - 1
+         end do
+         order(m + 1) = oi
+      end do
+   end subroutine likely_first
+
+   !> Double the particle arrays.
+   subroutine grow(self)
+      type(packing_type), intent(inout) :: self
+      real(wp), allocatable :: c2(:, :), r2(:, :, :), s2(:), h2(:)
+      integer, allocatable :: i2(:), k2(:), g2(:)
+      integer :: n, np
+      n = 2 * size(self%scale)
+      np = self%np
+      allocate (c2(3, n), r2(3, 3, n), s2(n), h2(n), i2(n), k2(n), g2(n))
+      c2(:, :np) = self%center(:, :np)
+      r2(:, :, :np) = self%rot(:, :, :np)
+      s2(:np) = self%scale(:np)
+      h2(:np) = self%rho(:np)
+      i2(:np) = self%sieve(:np)
+      k2(:np) = self%kind_of(:np)
+      g2(:np) = self%record(:np)
+      call move_alloc(c2, self%center)
+      call move_alloc(r2, self%rot)
+      call move_alloc(s2, self%scale)
+      call move_alloc(h2, self%rho)
+      call move_alloc(i2, self%sieve)
+      call move_alloc(k2, self%kind_of)
+      call move_alloc(g2, self%record)
+   end subroutine grow
+end module anm_parking_packing

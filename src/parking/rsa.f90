@@ -1,0 +1,313 @@
+!> The random sequential addition strategy (thesis section 2.1, Fig 1.3): sieve by sieve, largest
+!> first, particles are parked one at a time at random poses without overlap until the sieve's
+!> target volume is reached or its attempts are exhausted.
+!>
+!> A sieve that reaches its volume ends within half a particle of it (the last particle is kept
+!> only if it brings the volume closer to the target); that rounding difference (either sign)
+!> moves to the next sieve so that the cumulative gradation and the total stay on target. A
+!> shortfall from exhausted attempts is not carried. A particle that exhausts its attempts
+!> counts as a failure; the sieve ends after `max_failures` of them (the thesis: the first).
+!>
+!> Particles are speculated in batches (anm_parking_scheduler): the model does not depend on the
+!> batch size nor on the number of threads.
+!>
+!> Usage:
+!>     call park_rsa(pk, ks, ap, rp, target_fraction, result, run, error)
+module anm_parking_rsa
+   use anm_core_kinds, only: wp, i8, pi
+   use anm_core_error, only: error_type
+   use anm_parking_kinds, only: kind_set_type
+   use anm_parking_packing, only: packing_type, fit_scratch_type
+   use anm_parking_attempts, only: attempt_params_type, first_kind_of
+   use anm_parking_scheduler, only: batch_type, next_batch
+   use anm_parking_void_grid, only: void_grid_type, new_void_grid
+   implicit none
+   private
+
+   public :: park_rsa, rsa_params_type, sieve_result_type, run_state_type
+
+   !> Void placement: the void grid advances (blocks the particles parked since its last advance,
+   !> compacts when a quarter of its free list is stale) only after every `void_epoch` particles
+   !> (streams) of a sieve, and batches end at these boundaries. Every attempt of an epoch thus
+   !> draws its centre from the same grid, whatever the batch sizes and the number of threads.
+   integer, parameter :: void_epoch = 64
+
+   !> What the strategy needs of the run besides the per-sieve attempt parameters.
+   type :: rsa_params_type
+      !> Particles that may exhaust their attempts before a sieve ends.
+      integer :: max_failures = 1
+      !> Kinds built per particle when first needed (one shape and one size per particle), else
+      !> per sieve.
+      logical :: lazy = .false.
+      !> Void placement.
+      logical :: void = .false.
+      !> Largest batch; threads.
+      integer :: batch_limit = huge(1), nthreads = 1
+      !> Box volume (mm^3).
+      real(wp) :: vbox = 1.0_wp
+      !> Shell layers.
+      integer :: nlayer = 0
+      !> Unit for progress lines (< 0: none).
+      integer :: progress_unit = -1
+   end type rsa_params_type
+
+   !> What a sieve achieved.
+   type :: sieve_result_type
+      !> Particles parked, their volume (mm^3) and the shell volume fraction they add.
+      integer :: count = 0
+      real(wp) :: vol = 0.0_wp, shell_fraction = 0.0_wp
+      !> The sieve reached its target (rather than exhausting attempts).
+      logical :: reached = .false.
+   end type sieve_result_type
+
+   !> State carried across sieves: batch size, clock, attempts.
+   type :: run_state_type
+      integer :: batch = 1
+      integer(i8) :: t0 = 0, tlast = 0, rate = 1
+      !> Attempts of the run so far.
+      integer(i8) :: attempts = 0
+   end type run_state_type
+
+   !> State of the sieve being parked.
+   type :: sieve_state_type
+      integer :: sieve = 0, nstream = 0, failures = 0, predicted = 0
+      real(wp) :: target = 0.0_wp, target_fraction = 0.0_wp
+      integer(i8) :: attempts = 0
+      logical :: done = .false.
+      type(sieve_result_type) :: res
+   end type sieve_state_type
+
+contains
+
+   !> Park every sieve (ap(s), target_fraction(s)) into pk.
+   subroutine park_rsa(pk, ks, ap, rp, target_fraction, result, run, error)
+      !> Packing.
+      type(packing_type), intent(inout) :: pk
+      !> Kinds bookkeeping (kinds are built as needed into pk%kinds).
+      type(kind_set_type), intent(inout) :: ks
+      !> Attempt parameters of each sieve.
+      type(attempt_params_type), intent(in) :: ap(:)
+      !> Strategy parameters.
+      type(rsa_params_type), intent(in) :: rp
+      !> Target volume fraction of each sieve.
+      real(wp), intent(in) :: target_fraction(:)
+      !> What each sieve achieved.
+      type(sieve_result_type), allocatable, intent(out) :: result(:)
+      !> Run state (batch size, clock, attempts).
+      type(run_state_type), intent(inout) :: run
+      !> Error (a kind that cannot be built).
+      type(error_type), allocatable, intent(out) :: error
+      type(sieve_state_type) :: st
+      real(wp) :: carry
+      integer :: s
+      allocate (result(size(ap)))
+      carry = 0.0_wp
+      do s = 1, size(ap)
+         st = sieve_state_type(sieve=s, target_fraction=target_fraction(s))
+         st%target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
+         call park_sieve(pk, ks, ap(s), rp, st, run, error)
+         if (allocated(error)) return
+         result(s) = st%res
+         carry = merge(st%target - st%res%vol, 0.0_wp, st%res%reached)
+      end do
+   end subroutine park_rsa
+
+   !> Park one sieve.
+   subroutine park_sieve(pk, ks, ap, rp, st, run, error)
+      type(packing_type), intent(inout) :: pk
+      type(kind_set_type), intent(inout) :: ks
+      type(attempt_params_type), intent(in) :: ap
+      type(rsa_params_type), intent(in) :: rp
+      type(sieve_state_type), intent(inout) :: st
+      type(run_state_type), intent(inout) :: run
+      type(error_type), allocatable, intent(out) :: error
+      type(void_grid_type) :: vg
+      type(batch_type) :: bt
+      integer :: k, j, batch_now, np_blocked
+      integer(i8) :: tp1, t1
+      real(wp) :: r_in
+      r_in = 0.0_wp
+      if (rp%void .or. .not. rp%lazy) then
+         call ks%build(pk%kinds, [(k, k=ap%first_kind, ap%first_kind + ap%nkind - 1)], error)
+         if (allocated(error)) return
+      end if
+      if (rp%void) call start_void(vg, pk, ap, r_in)
+      np_blocked = pk%np
+      do while (st%res%vol < st%target .and. .not. st%done)
+         if (rp%lazy) then
+            call build_ahead(pk, ks, ap, rp, st, run%batch, error)
+            if (allocated(error)) return
+         end if
+         batch_now = run%batch
+         ! void placement: a batch never crosses an epoch boundary (see void_epoch)
+         if (rp%void) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
+         call system_clock(tp1)
+         call bt%speculate(batch_now, ap, pk, vg, st%nstream)
+         call system_clock(t1)
+         call settle_batch(bt, pk, ap, rp, vg, st, run)
+         if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
+            do j = np_blocked + 1, pk%np
+               call block_particle(vg, pk, j)
+            end do
+            np_blocked = pk%np
+            if (vg%stale > vg%nfree / 4) call vg%compact()
+            if (vg%nfree == 0) st%done = .true.
+         end if
+         run%batch = min(rp%batch_limit, next_batch(batch_now, real(t1 - tp1, wp) / run%rate, st%target - st%res%vol, &
+                                                    st%res%vol, st%res%count, rp%nthreads))
+         call progress_line(rp, st, run)
+      end do
+      st%res%reached = st%res%reached .or. st%res%vol >= st%target
+      call sieve_report(rp, st, run, vg, r_in)
+   end subroutine park_sieve
+
+   !> Phase 2 of a batch: settle its particles in order and park them until the sieve ends.
+   subroutine settle_batch(bt, pk, ap, rp, vg, st, run)
+      type(batch_type), intent(inout) :: bt
+      type(packing_type), intent(inout) :: pk
+      type(attempt_params_type), intent(in) :: ap
+      type(rsa_params_type), intent(in) :: rp
+      type(void_grid_type), intent(in) :: vg
+      type(sieve_state_type), intent(inout) :: st
+      type(run_state_type), intent(inout) :: run
+      type(fit_scratch_type) :: scratch
+      integer :: b, k
+      real(wp) :: sc, vol, vol_with
+      logical :: keep
+      do b = 1, bt%n
+         st%nstream = st%nstream + 1
+         call bt%settle(b, ap, pk, vg, scratch)
+         associate (a => bt%at(b))
+            run%attempts = run%attempts + a%count - merge(1, 0, a%done)
+            st%attempts = st%attempts + a%count - merge(1, 0, a%done)
+            if (a%done) then
+               ! this particle exhausted its attempts: the sieve ends after max_failures such
+               ! particles (the thesis: the first); later particles of the batch go on
+               st%failures = st%failures + 1
+               if (st%failures >= rp%max_failures) then
+                  st%done = .true.
+                  exit
+               end if
+               cycle
+            end if
+            k = a%k
+            sc = a%sc
+            ! the sieve's volume with this particle: one expression (the compiler contracts it to a
+            ! fused multiply-add, as the models were recorded)
+            vol = st%res%vol
+            vol_with = vol + sc**3 * pk%kinds(k)%volume
+            keep = vol_with <= st%target .or. (vol_with - st%target) <= (st%target - vol)
+            if (.not. keep) then
+               st%done = .true.
+               st%res%reached = .true.
+               exit
+            end if
+            call pk%add(k, a%c, a%r, sc, ap%sieve)
+            call bt%accept(b)
+            st%res%vol = vol_with
+            st%res%count = st%res%count + 1
+            if (rp%nlayer > 0) st%res%shell_fraction = st%res%shell_fraction &
+                                                       + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) - pk%kinds(k)%volume) &
+                                                       / rp%vbox
+            if (st%res%vol >= st%target) exit
+         end associate
+      end do
+   end subroutine settle_batch
+
+   !> Lazy kinds: build the kinds of the next batch and of the particles the sieve will probably
+   !> still need (twice the missing volume over the mean particle volume: a sphere of the mean
+   !> width until particles are parked), together so that they build in parallel.
+   subroutine build_ahead(pk, ks, ap, rp, st, batch, error)
+      type(packing_type), intent(inout) :: pk
+      type(kind_set_type), intent(inout) :: ks
+      type(attempt_params_type), intent(in) :: ap
+      type(rsa_params_type), intent(in) :: rp
+      type(sieve_state_type), intent(inout) :: st
+      integer, intent(in) :: batch
+      type(error_type), allocatable, intent(out) :: error
+      real(wp) :: vmean
+      integer :: horizon, j
+      if (st%res%count > 0) then
+         vmean = st%res%vol / st%res%count
+      else
+         vmean = pi / 6.0_wp * (0.5_wp * (ap%min_width + ap%max_width))**3
+      end if
+      horizon = st%nstream + max(batch, rp%nthreads + int(min(4096.0_wp, 2.0_wp * max(0.0_wp, st%target - st%res%vol) &
+                                                                / vmean)))
+      if (horizon <= st%predicted) return
+      call ks%build(pk%kinds, [(first_kind_of(ap, j), j=st%predicted + 1, horizon)], error)
+      if (allocated(error)) return
+      st%predicted = horizon
+   end subroutine build_ahead
+
+   !> A void grid for the sieve (cells for its smallest inscribed radius r_in) with every parked
+   !> particle blocked.
+   subroutine start_void(vg, pk, ap, r_in)
+      type(void_grid_type), intent(out) :: vg
+      type(packing_type), intent(in) :: pk
+      type(attempt_params_type), intent(in) :: ap
+      real(wp), intent(out) :: r_in
+      integer :: k, j
+      ! inscribed radius of the smallest particle this sieve can make
+      r_in = huge(1.0_wp)
+      do k = ap%first_kind, ap%first_kind + ap%nkind - 1
+         r_in = min(r_in, pk%kinds(k)%body%r_min * ap%min_width / pk%kinds(k)%width)
+      end do
+      call new_void_grid(vg, pk%p%box, pk%p%periodic, r_in, 2**24)
+      do j = 1, pk%np
+         call block_particle(vg, pk, j)
+      end do
+      call vg%compact()
+   end subroutine start_void
+
+   !> Block the void-grid cells made invalid by parked particle j.
+   subroutine block_particle(vg, pk, j)
+      type(void_grid_type), intent(inout) :: vg
+      type(packing_type), intent(in) :: pk
+      integer, intent(in) :: j
+      associate (kj => pk%kinds(pk%kind_of(j)))
+         call vg%block_particle(kj%body%shape, pk%center(:, j), pk%rot(:, :, j), pk%scale(j), pk%scale(j) * kj%body%r_min, &
+                                pk%rho(j))
+      end associate
+   end subroutine block_particle
+
+   !> A progress line about every two seconds.
+   subroutine progress_line(rp, st, run)
+      type(rsa_params_type), intent(in) :: rp
+      type(sieve_state_type), intent(in) :: st
+      type(run_state_type), intent(inout) :: run
+      integer(i8) :: t1
+      if (rp%progress_unit < 0) return
+      call system_clock(t1)
+      if (real(t1 - run%tlast, wp) / run%rate <= 2.0_wp) return
+      write (rp%progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", st%sieve, ": placed ", st%res%count, &
+         ", fraction ", st%res%vol / rp%vbox, " of ", st%target_fraction, ", ", &
+         real(run%attempts, wp) / max(1.0e-9_wp, real(t1 - run%t0, wp) / run%rate), " attempts/s"
+      run%tlast = t1
+   end subroutine progress_line
+
+   !> The lines that close a sieve.
+   subroutine sieve_report(rp, st, run, vg, r_in)
+      type(rsa_params_type), intent(in) :: rp
+      type(sieve_state_type), intent(in) :: st
+      type(run_state_type), intent(in) :: run
+      type(void_grid_type), intent(in) :: vg
+      real(wp), intent(in) :: r_in
+      integer(i8) :: t1
+      integer :: u
+      real(wp) :: f
+      if (rp%progress_unit < 0) return
+      u = rp%progress_unit
+      f = st%res%vol / rp%vbox
+      call system_clock(t1)
+      write (u, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,i0,a,f7.1,a)') "sieve ", st%sieve, " done: ", st%res%count, &
+         " particles, fraction ", f, " (target ", st%target_fraction, "), ", st%attempts, " attempts, ", &
+         st%failures, " particles not parked, ", real(t1 - run%t0, wp) / run%rate, " s"
+      if (rp%void) write (u, '(a,i0,a,f8.5,a,es10.3,a)') "sieve ", st%sieve, ": void grid free fraction ", &
+         vg%free_fraction(), " (inscribed radius ", r_in, " mm)"
+      if (.not. st%res%reached .and. st%target_fraction - f > 0.01_wp * st%target_fraction) then
+         write (u, '(a,i0,a,f8.5,a)') "warning: sieve ", st%sieve, " ended ", st%target_fraction - f, &
+            " short of its target (attempts exhausted)"
+      end if
+   end subroutine sieve_report
+end module anm_parking_rsa

@@ -1,0 +1,289 @@
+!> The batch scheduler of the parking: speculate a batch of particles in parallel, then settle them
+!> in stream order, so that any batch size and any number of threads give the serial model.
+!>
+!> Phase 1 (`speculate`, parallel): the batch's particles each find their first fitting attempt
+!> against the packing as it is (frozen). Phase 2 (`settle`, in order, by the strategy): each is
+!> re-checked against the particles parked since the batch started and, if hit, continues its own
+!> attempt sequence. Adding particles only adds overlaps, so this is exactly the serial result.
+!> The re-check is skipped for a particle whose bounding sphere meets no earlier one of the batch
+!> (`first_in_reach`, parallel) nor any earlier one parked elsewhere than its phase-1 position
+!> (`moved`, recorded by `accept`).
+!>
+!> Usage:
+!>     call bt%speculate(n, ap, pk, vg, nstream)
+!>     do b = 1, n
+!>        call bt%settle(b, ap, pk, vg, scratch)
+!>        ... decide; if parked: call pk%add(...); call bt%accept(b)
+!>     end do
+!>     n = next_batch(n, seconds, missing, vol, count, nthreads)
+module anm_parking_scheduler
+   use anm_core_kinds, only: wp
+   use anm_parking_attempts, only: attempt_type, attempt_params_type
+   use anm_parking_packing, only: packing_type, fit_scratch_type
+   use anm_parking_void_grid, only: void_grid_type
+   implicit none
+   private
+
+   public :: batch_type, next_batch, first_in_reach
+
+   !> One batch of speculated particles.
+   type :: batch_type
+      !> Number of particles.
+      integer :: n = 0
+      !> Attempt sequences (their current attempt is the particle's pose).
+      type(attempt_type), allocatable :: at(:)
+      !> Packing mark and number of particles when phase 1 ran.
+      integer :: frozen = 0, np_frozen = 0
+      !> Bounding radii of the phase-1 poses; no earlier phase-1 pose within reach.
+      real(wp), allocatable :: br(:)
+      logical, allocatable :: alone(:)
+      !> Particle b left its phase-1 pose in phase 2.
+      logical, allocatable :: moved_flag(:)
+      !> Particles parked at another pose than their phase-1 one, in order.
+      integer, allocatable :: moved(:)
+      integer :: nmoved = 0
+   contains
+      !> Phase 1.
+      procedure :: speculate
+      !> Phase 2 for one particle.
+      procedure :: settle
+      !> Record that particle b was parked.
+      procedure :: accept
+   end type batch_type
+
+contains
+
+   !> Phase 1: particles nstream + 1 .. nstream + n of the sieve each find their first attempt that
+   !> fits the packing as it is (in parallel; each particle draws only from its own stream).
+   subroutine speculate(self, n, ap, pk, vg, nstream)
+      !> Batch.
+      class(batch_type), intent(out) :: self
+      !> Number of particles.
+      integer, intent(in) :: n
+      !> Parameters of the sieve.
+      type(attempt_params_type), intent(in) :: ap
+      !> Packing (frozen during phase 1).
+      type(packing_type), intent(in) :: pk
+      !> Void grid (void placement).
+      type(void_grid_type), intent(in) :: vg
+      !> Particles of the sieve before this batch.
+      integer, intent(in) :: nstream
+      real(wp), allocatable :: bx(:, :)
+      integer :: b
+      self%n = n
+      allocate (self%at(n), self%br(n), self%alone(n), self%moved_flag(n), self%moved(n), bx(3, n))
+      self%moved_flag = .false.
+      call run_phase1(self%at, ap, pk, vg, nstream)
+      do b = 1, n
+         bx(:, b) = self%at(b)%c
+         self%br(b) = self%at(b)%sc * pk%kinds(max(1, self%at(b)%k))%r_out
+      end do
+      call first_in_reach(bx, self%br, pk%p%box, pk%p%periodic, self%alone)
+      self%frozen = pk%mark()
+      self%np_frozen = pk%np
+   end subroutine speculate
+
+   !> The parallel loop of phase 1.
+   subroutine run_phase1(at, ap, pk, vg, nstream)
+      type(attempt_type), intent(inout) :: at(:)
+      type(attempt_params_type), intent(in) :: ap
+      type(packing_type), intent(in) :: pk
+      type(void_grid_type), intent(in) :: vg
+      integer, intent(in) :: nstream
+      integer :: b
+      !$omp parallel do default(none) shared(at, ap, pk, vg, nstream) private(b) schedule(dynamic, 1)
+      do b = 1, size(at)
+         block
+            type(fit_scratch_type) :: scratch
+            call at(b)%start(ap, nstream + b)
+            do
+               call at(b)%next(ap, pk%kinds, vg)
+               if (at(b)%done) exit
+               if (pk%fits(at(b)%k, at(b)%c, at(b)%r, at(b)%sc, scratch)) exit
+            end do
+         end block
+      end do
+      !$omp end parallel do
+   end subroutine run_phase1
+
+   !> Phase 2 for particle b (after every earlier particle of the batch was settled and parked or
+   !> not): its attempt is re-checked against the particles parked since phase 1 when it may meet
+   !> one, and if it overlaps, its sequence continues against the whole packing.
+   subroutine settle(self, b, ap, pk, vg, scratch)
+      !> Batch.
+      class(batch_type), intent(inout) :: self
+      !> Particle of the batch.
+      integer, intent(in) :: b
+      !> Parameters of the sieve.
+      type(attempt_params_type), intent(in) :: ap
+      !> Packing.
+      type(packing_type), intent(in) :: pk
+      !> Void grid (void placement).
+      type(void_grid_type), intent(in) :: vg
+      !> Scratch for the overlap tests.
+      type(fit_scratch_type), intent(inout) :: scratch
+      associate (a => self%at(b))
+         if (a%done) return
+         if (self%alone(b)) then
+            if (.not. near_moved(self, b, pk)) return
+         end if
+         if (pk%fits(a%k, a%c, a%r, a%sc, scratch, since=self%frozen)) return
+         self%moved_flag(b) = .true.
+         do
+            call a%next(ap, pk%kinds, vg)
+            if (a%done) exit
+            if (pk%fits(a%k, a%c, a%r, a%sc, scratch)) exit
+         end do
+      end associate
+   end subroutine settle
+
+   !> Record that particle b of the batch was parked (at its settled pose).
+   subroutine accept(self, b)
+      !> Batch.
+      class(batch_type), intent(inout) :: self
+      !> Particle of the batch.
+      integer, intent(in) :: b
+      if (.not. self%moved_flag(b)) return
+      self%nmoved = self%nmoved + 1
+      self%moved(self%nmoved) = b
+   end subroutine accept
+
+   !> True when the bounding sphere of batch particle bb (phase-1 pose) meets that of a particle
+   !> of the batch parked at another pose than its phase-1 one.
+   logical function near_moved(bt, bb, pk) result(near)
+      type(batch_type), intent(in) :: bt
+      integer, intent(in) :: bb
+      type(packing_type), intent(in) :: pk
+      integer :: i, mv
+      real(wp) :: d(3), lim
+      near = .false.
+      do i = 1, bt%nmoved
+         mv = bt%moved(i)
+         d = bt%at(mv)%c - bt%at(bb)%c
+         if (pk%p%periodic) d = d - pk%p%box * anint(d / pk%p%box)
+         lim = bt%br(bb) + bt%at(mv)%sc * pk%kinds(bt%at(mv)%k)%r_out
+         if (sum(d**2) < lim * lim) then
+            near = .true.
+            return
+         end if
+      end do
+   end function near_moved
+
+   !> Size of the next batch. Any size gives the same model, so it follows the machine: about
+   !> `batch_seconds` of phase 1 (few synchronisations, which matters most when the cores are
+   !> shared with other jobs), changing by at most a factor 2 per batch, and not much beyond the
+   !> particles the sieve still needs (speculation past its end is wasted work).
+   pure integer function next_batch(now, seconds, missing, vol_sieve, count_sieve, nthr) result(nb)
+      !> Size of the batch that just ran.
+      integer, intent(in) :: now
+      !> Its phase-1 time (s).
+      real(wp), intent(in) :: seconds
+      !> Volume the sieve still misses and volume parked in it (mm^3).
+      real(wp), intent(in) :: missing, vol_sieve
+      !> Particles parked in the sieve; threads.
+      integer, intent(in) :: count_sieve, nthr
+      real(wp), parameter :: batch_seconds = 0.05_wp
+      integer, parameter :: max_per_thread = 1024
+      real(wp) :: f, need
+      f = 2.0_wp
+      if (seconds > 0.0_wp) f = max(0.5_wp, min(2.0_wp, batch_seconds / seconds))
+      nb = max(nthr, min(max_per_thread * nthr, nint(now * f)))
+      if (count_sieve > 0) then
+         need = max(0.0_wp, missing) / (vol_sieve / count_sieve)
+         nb = max(nthr, min(nb, int(min(need, real(huge(1) / 2, wp))) + nthr))
+      end if
+   end function next_batch
+
+   !> For each sphere (centres x(:, i) in the box, radii r(i)), whether no sphere of smaller index
+   !> meets it (nearest periodic image): spheres hashed into cells at least 2 max(r) wide, the 27
+   !> cells around each searched in parallel.
+   subroutine first_in_reach(x, r, box, periodic, alone)
+      !> Centres (3, n).
+      real(wp), intent(in) :: x(:, :)
+      !> Radii.
+      real(wp), intent(in) :: r(:)
+      !> Box edges.
+      real(wp), intent(in) :: box(3)
+      !> Periodic boundaries.
+      logical, intent(in) :: periodic
+      !> No sphere of smaller index meets sphere i.
+      logical, intent(out) :: alone(:)
+      integer, allocatable :: cell(:, :), first(:), item(:), key(:)
+      integer :: n, nc(3), nbucket, i, d
+      real(wp) :: h(3)
+      n = size(r)
+      alone = .true.
+      if (n < 2) return
+      nc = max(1, int(box / max(2.0_wp * maxval(r), tiny(1.0_wp))))
+      nc = min(nc, 1024)
+      h = box / nc
+      nbucket = 2**ceiling(log(real(2 * n, wp)) / log(2.0_wp))
+      allocate (cell(3, n), key(n), first(nbucket + 1), item(n))
+      do i = 1, n
+         do d = 1, 3
+            cell(d, i) = min(nc(d) - 1, max(0, int(x(d, i) / h(d))))
+         end do
+         key(i) = bucket_of(cell(:, i), nbucket)
+      end do
+      ! counting sort by bucket, indices ascending within a bucket
+      first = 0
+      do i = 1, n
+         first(key(i) + 1) = first(key(i) + 1) + 1
+      end do
+      do i = 2, nbucket + 1
+         first(i) = first(i) + first(i - 1)
+      end do
+      do i = 1, n
+         first(key(i)) = first(key(i)) + 1
+         item(first(key(i))) = i
+      end do
+      ! first(k) now ends bucket k: bucket k is item(first(k - 1) + 1 : first(k)), bucket 1 from 1
+      !$omp parallel do default(none) shared(n, x, r, box, periodic, nc, nbucket, cell, first, item, alone) &
+      !$omp& private(i) schedule(static)
+      do i = 2, n
+         alone(i) = nothing_near(i, x, r, box, periodic, nc, nbucket, cell, first, item)
+      end do
+      !$omp end parallel do
+   end subroutine first_in_reach
+
+   !> Hash bucket (1..nbucket, a power of 2) of a cell.
+   pure integer function bucket_of(c, nbucket) result(k)
+      integer, intent(in) :: c(3), nbucket
+      k = 1 + iand(c(1) + 1031 * (c(2) + 1031 * c(3)), nbucket - 1)
+   end function bucket_of
+
+   !> No sphere of smaller index than i meets sphere i (first_in_reach's hash).
+   pure logical function nothing_near(i, x, r, box, periodic, nc, nbucket, cell, first, item) result(ok)
+      integer, intent(in) :: i, nc(3), nbucket, cell(:, :), first(:), item(:)
+      real(wp), intent(in) :: x(:, :), r(:), box(3)
+      logical, intent(in) :: periodic
+      integer :: d1, d2, d3, c(3), k, m, j, lo
+      real(wp) :: dx(3)
+      ok = .true.
+      do d3 = -1, 1
+         do d2 = -1, 1
+            do d1 = -1, 1
+               c = cell(:, i) + [d1, d2, d3]
+               if (periodic) then
+                  c = modulo(c, nc)
+               else if (any(c < 0 .or. c >= nc)) then
+                  cycle
+               end if
+               k = bucket_of(c, nbucket)
+               lo = 1
+               if (k > 1) lo = first(k - 1) + 1
+               do m = lo, first(k)
+                  j = item(m)
+                  if (j >= i) exit
+                  dx = x(:, j) - x(:, i)
+                  if (periodic) dx = dx - box * anint(dx / box)
+                  if (sum(dx**2) < (r(i) + r(j))**2) then
+                     ok = .false.
+                     return
+                  end if
+               end do
+            end do
+         end do
+      end do
+   end function nothing_near
+end module anm_parking_scheduler

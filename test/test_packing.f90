@@ -1,0 +1,233 @@
+!> Tests of the packing type: add, remove and move keep the neighbour query and the overlap test of
+!> a candidate pose equal to brute force (spheres, whose overlap is known exactly), in periodic
+!> and walled boxes; a mark limits the test to the particles placed after it.
+module test_packing
+   use anm_core_kinds, only: wp, i8
+   use anm_core_error, only: error_type
+   use anm_core_random, only: rng_type, new_rng
+   use anm_shapes_analytic, only: sphere_shape
+   use anm_geometry_rotation, only: random_rotation
+   use anm_contact_body, only: new_contact_body
+   use anm_parking_kinds, only: particle_kind_type
+   use anm_parking_packing, only: packing_type, packing_params_type, fit_scratch_type, new_packing
+   use anm_testing, only: unittest_type, new_unittest, check
+   implicit none
+   private
+   public :: collect_packing
+
+   !> Candidates closer than this (relative) to contact are not judged (the exact test's tolerance).
+   real(wp), parameter :: contact_margin = 1.0e-6_wp
+
+contains
+
+   !> Tests of this suite.
+   subroutine collect_packing(tests)
+      type(unittest_type), allocatable, intent(out) :: tests(:)
+      tests = [ &
+              new_unittest("add/remove/move: neighbours = brute force, periodic", test_neighbours_periodic), &
+              new_unittest("add/remove/move: neighbours = brute force, walls", test_neighbours_walls), &
+              new_unittest("add/remove/move: fits = sphere overlap, periodic", test_fits_periodic), &
+              new_unittest("add/remove/move: fits = sphere overlap and walls", test_fits_walls), &
+              new_unittest("compact keeps the particles and the answers", test_compact), &
+              new_unittest("fits since a mark tests only later particles", test_since)]
+   end subroutine collect_packing
+
+   !> A packing of unit-sphere kinds (kind 1) with periodic or walled box.
+   subroutine sphere_packing(pk, periodic, box, error)
+      type(packing_type), intent(out) :: pk
+      logical, intent(in) :: periodic
+      real(wp), intent(in) :: box(3)
+      type(error_type), allocatable, intent(out) :: error
+      type(particle_kind_type), allocatable :: kinds(:)
+      type(packing_params_type) :: p
+      allocate (kinds(1))
+      call new_contact_body(kinds(1)%body, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      kinds(1)%width = 2.0_wp
+      kinds(1)%volume = 4.0_wp / 3.0_wp * acos(-1.0_wp)
+      kinds(1)%r_out = kinds(1)%body%r_max
+      kinds(1)%r_in_query = kinds(1)%body%r_min
+      kinds(1)%r_in_parked = kinds(1)%body%r_min
+      p%box = box
+      p%periodic = periodic
+      p%rho_min = 0.1_wp
+      call new_packing(pk, p, kinds)
+   end subroutine sphere_packing
+
+   !> Random adds (radii 0.1..1, log-uniform), then removes and moves (with new scales).
+   subroutine shuffle(pk, rng, n, nremove, nmove)
+      type(packing_type), intent(inout) :: pk
+      type(rng_type), intent(inout) :: rng
+      integer, intent(in) :: n, nremove, nmove
+      integer :: i
+      do i = 1, n
+         call pk%add(1, [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box, random_rotation(rng), &
+                     0.1_wp * 10.0_wp**rng%uniform(), 1)
+      end do
+      do i = 1, nremove
+         call pk%remove(rng%below(pk%np))
+      end do
+      do i = 1, nmove
+         call pk%move(rng%below(pk%np), [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box, &
+                      random_rotation(rng), 0.1_wp * 10.0_wp**rng%uniform())
+      end do
+   end subroutine shuffle
+
+   !> Nearest-image distance between two points.
+   pure real(wp) function distance(pk, a, b) result(d)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: a(3), b(3)
+      real(wp) :: e(3)
+      e = a - b
+      if (pk%p%periodic) e = e - pk%p%box * anint(e / pk%p%box)
+      d = norm2(e)
+   end function distance
+
+   subroutine neighbours_case(error, periodic)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      type(packing_type) :: pk
+      type(rng_type) :: rng
+      integer, allocatable :: ids(:)
+      real(wp), allocatable :: shifts(:, :)
+      real(wp) :: q(3), rq
+      integer :: k, n, j, nbrute
+      logical, allocatable :: seen(:)
+      call sphere_packing(pk, periodic, [10.0_wp, 10.0_wp, 10.0_wp], error)
+      if (allocated(error)) return
+      call new_rng(rng, 21_i8, 0_i8)
+      call shuffle(pk, rng, 400, 150, 200)
+      call check(error, pk%np, 250, "particles after 400 adds and 150 removes")
+      if (allocated(error)) return
+      do k = 1, 200
+         q = [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box
+         rq = 0.1_wp * 10.0_wp**rng%uniform()
+         call pk%neighbours(q, rq, ids, shifts, n)
+         allocate (seen(pk%np))
+         seen = .false.
+         seen(ids(:n)) = .true.
+         nbrute = 0
+         do j = 1, pk%np
+            if (distance(pk, pk%center(:, j), q) < rq + pk%rho(j)) nbrute = nbrute + 1
+         end do
+         call check(error, n, nbrute, "neighbours vs brute force")
+         if (allocated(error)) return
+         do j = 1, n
+            call check(error, norm2(pk%center(:, ids(j)) + shifts(:, j) - q) < rq + pk%rho(ids(j)), &
+                       "a neighbour's image meets the sphere")
+            if (allocated(error)) return
+         end do
+         deallocate (seen)
+      end do
+   end subroutine neighbours_case
+
+   subroutine test_neighbours_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .true.)
+   end subroutine test_neighbours_periodic
+
+   subroutine test_neighbours_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call neighbours_case(error, .false.)
+   end subroutine test_neighbours_walls
+
+   !> Brute-force answer for a candidate sphere (x, r): 1 fits, 0 overlaps, -1 too close to call.
+   integer function brute_fit(pk, x, r, walls) result(ans)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: x(3), r
+      logical, intent(in) :: walls
+      integer :: j
+      real(wp) :: gap
+      ans = 1
+      if (walls) then
+         gap = min(minval(x), minval(pk%p%box - x)) - r
+         if (abs(gap) < contact_margin * r) then
+            ans = -1
+            return
+         end if
+         if (gap < 0.0_wp) ans = 0
+      end if
+      do j = 1, pk%np
+         gap = distance(pk, pk%center(:, j), x) - r - pk%scale(j)
+         if (abs(gap) < contact_margin * (r + pk%scale(j))) then
+            ans = -1
+            return
+         end if
+         if (gap < 0.0_wp) ans = 0
+      end do
+   end function brute_fit
+
+   subroutine fits_case(error, periodic, compact)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic, compact
+      type(packing_type) :: pk
+      type(rng_type) :: rng
+      type(fit_scratch_type) :: scratch
+      real(wp) :: x(3), r
+      integer :: k, ans, nfit, nover
+      call sphere_packing(pk, periodic, [8.0_wp, 8.0_wp, 8.0_wp], error)
+      if (allocated(error)) return
+      call new_rng(rng, 23_i8, 0_i8)
+      call shuffle(pk, rng, 120, 40, 60)
+      if (compact) then
+         call pk%compact()
+         call check(error, pk%ndead, 0, "no retired records after compact")
+         if (allocated(error)) return
+      end if
+      nfit = 0
+      nover = 0
+      do k = 1, 400
+         x = [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box
+         r = 0.1_wp * 10.0_wp**rng%uniform()
+         ans = brute_fit(pk, x, r, .not. periodic)
+         if (ans < 0) cycle
+         if (ans == 1) nfit = nfit + 1
+         if (ans == 0) nover = nover + 1
+         call check(error, pk%fits(1, x, random_rotation(rng), r, scratch) .eqv. (ans == 1), &
+                    "fits disagrees with the sphere overlap")
+         if (allocated(error)) return
+      end do
+      call check(error, nfit > 20 .and. nover > 20, "both answers were tested")
+   end subroutine fits_case
+
+   subroutine test_fits_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call fits_case(error, .true., .false.)
+   end subroutine test_fits_periodic
+
+   subroutine test_fits_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call fits_case(error, .false., .false.)
+   end subroutine test_fits_walls
+
+   subroutine test_compact(error)
+      type(error_type), allocatable, intent(out) :: error
+      call fits_case(error, .true., .true.)
+   end subroutine test_compact
+
+   subroutine test_since(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(packing_type) :: pk
+      type(fit_scratch_type) :: scratch
+      real(wp) :: rot(3, 3)
+      integer :: m
+      rot = reshape([1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp], [3, 3])
+      call sphere_packing(pk, .true., [10.0_wp, 10.0_wp, 10.0_wp], error)
+      if (allocated(error)) return
+      call pk%add(1, [2.0_wp, 2.0_wp, 2.0_wp], rot, 1.0_wp, 1)
+      call pk%add(1, [6.0_wp, 6.0_wp, 6.0_wp], rot, 1.0_wp, 1)
+      m = pk%mark()
+      call check(error, .not. pk%fits(1, [2.5_wp, 2.0_wp, 2.0_wp], rot, 1.0_wp, scratch), "overlap with particle 1")
+      if (allocated(error)) return
+      call check(error, pk%fits(1, [2.5_wp, 2.0_wp, 2.0_wp], rot, 1.0_wp, scratch, since=m), "nothing placed since the mark")
+      if (allocated(error)) return
+      ! particle 2 moves next to the candidate: after the mark
+      call pk%move(2, [3.0_wp, 4.0_wp, 2.0_wp], rot)
+      call check(error, .not. pk%fits(1, [2.5_wp, 3.0_wp, 2.0_wp], rot, 0.5_wp, scratch, since=m), &
+                 "the moved particle counts after the mark")
+      if (allocated(error)) return
+      call pk%remove(2)
+      call check(error, pk%fits(1, [2.5_wp, 3.0_wp, 2.0_wp], rot, 0.5_wp, scratch, since=m), &
+                 "the removed particle is gone")
+   end subroutine test_since
+end module test_packing
