@@ -31,7 +31,8 @@ module anm_parking_engine
    use anm_contact_body, only: contact_body_type, new_contact_body
    use anm_contact_overlap, only: contact_params_type, contact_method, bodies_overlap, body_crosses_walls
    use anm_shells_build, only: shell_report_type, build_layers
-   use anm_parking_config, only: run_config_type, shell_mode, resolved_namelist
+   use anm_config_job, only: run_config_type, shell_mode, thickness_unit, placement, write_config
+   use anm_shells_thickness, only: thickness_to_shape_units, thickness_to_mm
    use anm_parking_cell_list, only: cell_list_type, new_cell_list
    use anm_parking_void_grid, only: void_grid_type, new_void_grid
    use anm_io_model, only: model_type
@@ -142,23 +143,23 @@ contains
       ! starts
       allocate (built(size(kinds)))
       built = .false.
-      lazy = cfg%max_shapes == 1 .and. cfg%max_sizes == 1
-      params%method = merge(contact_method%eob, contact_method%newton_raphson, cfg%contact_method == "eob")
-      params%next = cfg%n_ext
-      params%nbox = cfg%n_box
-      params%certified = cfg%certified
+      lazy = cfg%parking%max_shapes == 1 .and. cfg%parking%max_sizes == 1
+      params%method = cfg%parking%contact_method
+      params%next = cfg%parking%n_ext
+      params%nbox = cfg%parking%n_box
+      params%certified = cfg%parking%certified
 
       nlev = 1
-      if (cfg%nlayer > 0 .and. cfg%thickness_unit == "mm") nlev = width_levels
-      vbox = product(cfg%box)
+      if (cfg%shells%nlayer > 0 .and. cfg%shells%unit == thickness_unit%mm) nlev = width_levels
+      vbox = product(cfg%box%length)
       ! a bounding radius is at least half the particle's width (every caliper dimension lies in
       ! the bounding sphere)
-      rho_min = 0.5_wp * minval(cfg%min_width(:cfg%nsieve))
-      call new_cell_list(cl, cfg%box, cfg%periodic, rho_min, capacity=4096)
+      rho_min = 0.5_wp * minval(cfg%sieves%min_width(:cfg%sieves%nsieve))
+      call new_cell_list(cl, cfg%box%length, cfg%box%periodic, rho_min, capacity=4096)
       allocate (center(3, 4096), rot(3, 3, 4096), scale(4096), rho(4096), sieve_of(4096), kind_of(4096))
       np = 0
       attempts = 0
-      allocate (model%achieved_fraction(cfg%nsieve), model%count(cfg%nsieve), model%shell_fraction(cfg%nsieve))
+      allocate (model%achieved_fraction(cfg%sieves%nsieve), model%count(cfg%sieves%nsieve), model%shell_fraction(cfg%sieves%nsieve))
       model%achieved_fraction = 0.0_wp
       model%count = 0
       model%shell_fraction = 0.0_wp
@@ -171,13 +172,13 @@ contains
       call system_clock(t0, rate)
       tlast = t0
 
-      void = cfg%placement == "void"
+      void = cfg%parking%placement == placement%void
       carry = 0.0_wp
-      do s = 1, cfg%nsieve
+      do s = 1, cfg%sieves%nsieve
          ! a sieve that reaches its volume ends within half a particle of it; that rounding
          ! difference (either sign) moves to the next sieve so that the cumulative gradation and
          ! the total stay on target. A shortfall from exhausted attempts is not carried.
-         target = max(0.0_wp, cfg%target_fraction(s) * vbox + carry)
+         target = max(0.0_wp, cfg%sieves%target_fraction(s) * vbox + carry)
          reached = .false.
          vol = 0.0_wp
          attempts_sieve = 0
@@ -194,9 +195,9 @@ contains
             ! inscribed radius of the smallest particle this sieve can make
             r_in = huge(1.0_wp)
             do k = first_kind(s), first_kind(s) + nkind_sieve(s) - 1
-               r_in = min(r_in, kinds(k)%body%r_min * cfg%min_width(s) / kinds(k)%width)
+               r_in = min(r_in, kinds(k)%body%r_min * cfg%sieves%min_width(s) / kinds(k)%width)
             end do
-            call new_void_grid(vg, cfg%box, cfg%periodic, r_in, 2**24)
+            call new_void_grid(vg, cfg%box%length, cfg%box%periodic, r_in, 2**24)
             do j = 1, np
                call block(j)
             end do
@@ -220,7 +221,7 @@ contains
                if (model%count(s) > 0) then
                   vmean = vol / model%count(s)
                else
-                  vmean = pi / 6.0_wp * (0.5_wp * (cfg%min_width(s) + cfg%max_width(s)))**3
+                  vmean = pi / 6.0_wp * (0.5_wp * (cfg%sieves%min_width(s) + cfg%sieves%max_width(s)))**3
                end if
                horizon = nstream + max(batch, nthreads + int(min(4096.0_wp, 2.0_wp * max(0.0_wp, target - vol) / vmean)))
                if (horizon > predicted) then
@@ -236,7 +237,7 @@ contains
                block
                   integer, allocatable :: bcand(:)
                   real(wp), allocatable :: bshift(:, :)
-                  call new_rng(at(b)%rng, cfg%seed, int(s, i8) * 4294967296_i8 + nstream + b)
+                  call new_rng(at(b)%rng, cfg%run%seed, int(s, i8) * 4294967296_i8 + nstream + b)
                   do
                      call next_attempt(at(b), s)
                      if (at(b)%done) exit
@@ -251,7 +252,7 @@ contains
                bx(:, b) = at(b)%c
                br(b) = at(b)%sc * kinds(max(1, at(b)%k))%r_out
             end do
-            call first_in_reach(bx, br, cfg%box, cfg%periodic, alone)
+            call first_in_reach(bx, br, cfg%box%length, cfg%box%periodic, alone)
             np_frozen = np
             allocate (moved(batch))
             nmoved = 0
@@ -274,7 +275,7 @@ contains
                   ! this particle exhausted its attempts: the sieve ends after max_failures such
                   ! particles (the thesis: the first); later particles of the batch go on
                   failures = failures + 1
-                  if (failures >= cfg%max_failures) then
+                  if (failures >= cfg%parking%max_failures) then
                      sieve_done = .true.
                      exit
                   end if
@@ -296,8 +297,8 @@ contains
                end if
                vol = vol + v
                model%count(s) = model%count(s) + 1
-               if (cfg%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
-                                                            + sc**3 * (kinds(k)%layer_volume(cfg%nlayer) - kinds(k)%volume) / vbox
+               if (cfg%shells%nlayer > 0) model%shell_fraction(s) = model%shell_fraction(s) &
+                  + sc**3 * (kinds(k)%layer_volume(cfg%shells%nlayer) - kinds(k)%volume) / vbox
                if (vol >= target) exit
             end do
             if (void) then
@@ -314,7 +315,7 @@ contains
             call system_clock(t1)
             if (present(progress_unit) .and. real(t1 - tlast, wp) / rate > 2.0_wp) then
                write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", s, ": placed ", model%count(s), &
-                  ", fraction ", vol / vbox, " of ", cfg%target_fraction(s), ", ", &
+                  ", fraction ", vol / vbox, " of ", cfg%sieves%target_fraction(s), ", ", &
                   real(attempts, wp) / max(1.0e-9_wp, real(t1 - t0, wp) / rate), " attempts/s"
                tlast = t1
             end if
@@ -325,49 +326,46 @@ contains
          if (present(progress_unit)) then
             call system_clock(t1)
             write (progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,i0,a,i0,a,f7.1,a)') "sieve ", s, " done: ", &
-               model%count(s), " particles, fraction ", vol / vbox, " (target ", cfg%target_fraction(s), "), ", &
+               model%count(s), " particles, fraction ", vol / vbox, " (target ", cfg%sieves%target_fraction(s), "), ", &
                attempts_sieve, " attempts, ", failures, " particles not parked, ", real(t1 - t0, wp) / rate, " s"
             if (void) write (progress_unit, '(a,i0,a,f8.5,a,es10.3,a)') "sieve ", s, ": void grid free fraction ", &
                vg%free_fraction(), " (inscribed radius ", r_in, " mm)"
-            if (.not. reached .and. cfg%target_fraction(s) - vol / vbox > 0.01_wp * cfg%target_fraction(s)) then
+            if (.not. reached .and. cfg%sieves%target_fraction(s) - vol / vbox > 0.01_wp * cfg%sieves%target_fraction(s)) then
                write (progress_unit, '(a,i0,a,f8.5,a)') "warning: sieve ", s, " ended ", &
-                  cfg%target_fraction(s) - vol / vbox, " short of its target (attempts exhausted)"
+                  cfg%sieves%target_fraction(s) - vol / vbox, " short of its target (attempts exhausted)"
             end if
          end if
       end do
       call system_clock(t1)
       ! the VRML output draws every kind
-      if (cfg%vrml) then
+      if (cfg%output%vrml) then
          call build_kinds(cfg, model, kinds, same, built, [(k, k=1, size(kinds))], error)
          if (allocated(error)) return
       end if
 
-      model%box = cfg%box
-      model%periodic = cfg%periodic
+      model%box = cfg%box%length
+      model%periodic = cfg%box%periodic
       model%np = np
       model%center = center(:, :np)
       model%rotation = rot(:, :, :np)
       model%scale = scale(:np)
       model%sieve = sieve_of(:np)
       kind_of = kind_of(:np)
-      allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%nlayer, np))
+      allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%shells%nlayer, np))
       do k = 1, np
          model%shape(k) = kinds(kind_of(k))%shape
          model%nmax(k) = kinds(kind_of(k))%order
-         if (cfg%nlayer > 0) then
-            if (cfg%thickness_unit == "mm") then
-               model%shell_thickness(:, k) = cfg%thickness
-            else
-               model%shell_thickness(:, k) = cfg%thickness * kinds(kind_of(k))%length * scale(k)
-            end if
+         if (cfg%shells%nlayer > 0) then
+            model%shell_thickness(:, k) = thickness_to_mm(cfg%shells%thickness, cfg%shells%unit, &
+                                                          kinds(kind_of(k))%length, scale(k))
          end if
       end do
-      model%min_width = cfg%min_width
-      model%max_width = cfg%max_width
-      model%target_fraction = cfg%target_fraction
+      model%min_width = cfg%sieves%min_width
+      model%max_width = cfg%sieves%max_width
+      model%target_fraction = cfg%sieves%target_fraction
       model%namelist = cfg%text
-      model%resolved = resolved_namelist(cfg)
-      model%seed = cfg%seed
+      model%resolved = write_config(cfg)
+      model%seed = cfg%run%seed
       model%attempts = attempts
       model%wall_time = real(t1 - t0, wp) / rate
    contains
@@ -378,10 +376,10 @@ contains
          real(wp) :: x(3)
          integer :: d
          do d = 1, 3
-            if (cfg%periodic) then
-               x(d) = gen%uniform() * cfg%box(d)
+            if (cfg%box%periodic) then
+               x(d) = gen%uniform() * cfg%box%length(d)
             else
-               x(d) = gen%uniform_range(margin, cfg%box(d) - margin)
+               x(d) = gen%uniform_range(margin, cfg%box%length(d) - margin)
             end if
          end do
       end function random_centre
@@ -398,11 +396,11 @@ contains
          logical :: hit
          integer, allocatable :: order(:)
          ok = .false.
-         if (.not. cfg%periodic .and. jmin == 0) then
-            if (cfg%nlayer > 0 .and. cfg%mode == shell_mode%exclude) then
-               if (body_crosses_walls(kinds(kn)%shell_body, x, rr, s_, cfg%box)) return
+         if (.not. cfg%box%periodic .and. jmin == 0) then
+            if (cfg%shells%nlayer > 0 .and. cfg%shells%mode == shell_mode%exclude) then
+               if (body_crosses_walls(kinds(kn)%shell_body, x, rr, s_, cfg%box%length)) return
             else
-               if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box)) return
+               if (body_crosses_walls(kinds(kn)%body, x, rr, s_, cfg%box%length)) return
             end if
          end if
          call cl%neighbours(x, s_ * kinds(kn)%r_out, cnd, shf, ncand, hit, rin=s_ * kinds(kn)%r_in_query, jmin=jmin)
@@ -413,9 +411,9 @@ contains
             j = cnd(i)
             xj = center(:, j) + shf(:, i)
             associate (kj => kinds(kind_of(j)))
-               if (cfg%nlayer == 0 .or. cfg%mode == shell_mode%overlap) then
+               if (cfg%shells%nlayer == 0 .or. cfg%shells%mode == shell_mode%overlap) then
                   if (bodies_overlap(kinds(kn)%body, x, rr, s_, kj%body, xj, rot(:, :, j), scale(j), params)) return
-               else if (cfg%mode == shell_mode%exclude) then
+               else if (cfg%shells%mode == shell_mode%exclude) then
                   if (bodies_overlap(kinds(kn)%shell_body, x, rr, s_, kj%shell_body, xj, rot(:, :, j), scale(j), &
                                      params)) return
                else
@@ -474,7 +472,7 @@ contains
          do i = 1, nmoved
             mv = moved(i)
             d = at(mv)%c - at(bb)%c
-            if (cfg%periodic) d = d - cfg%box * anint(d / cfg%box)
+            if (cfg%box%periodic) d = d - cfg%box%length * anint(d / cfg%box%length)
             lim = br(bb) + at(mv)%sc * kinds(at(mv)%k)%r_out
             if (sum(d**2) < lim * lim) then
                near = .true.
@@ -507,19 +505,19 @@ contains
          type(attempt_type), intent(inout) :: a
          integer, intent(in) :: sv
          if (a%done) return
-         if (a%is > 0 .and. a%il < cfg%max_locations) then
+         if (a%is > 0 .and. a%il < cfg%parking%max_locations) then
             a%il = a%il + 1
-         else if (a%is > 0 .and. a%io < cfg%max_orientations) then
+         else if (a%is > 0 .and. a%io < cfg%parking%max_orientations) then
             a%io = a%io + 1
             a%il = 1
             a%r = random_rotation(a%rng)
-         else if (a%is > 0 .and. a%iz < cfg%max_sizes) then
+         else if (a%is > 0 .and. a%iz < cfg%parking%max_sizes) then
             a%iz = a%iz + 1
             call new_size(a, sv)
             a%io = 1
             a%il = 1
             a%r = random_rotation(a%rng)
-         else if (a%is < cfg%max_shapes) then
+         else if (a%is < cfg%parking%max_shapes) then
             a%is = a%is + 1
             call pick_shape(a, sv)
             a%iz = 1
@@ -575,7 +573,7 @@ contains
       integer function first_kind_of(sv, stream) result(k)
          integer, intent(in) :: sv, stream
          type(attempt_type) :: a
-         call new_rng(a%rng, cfg%seed, int(sv, i8) * 4294967296_i8 + stream)
+         call new_rng(a%rng, cfg%run%seed, int(sv, i8) * 4294967296_i8 + stream)
          call pick_shape(a, sv)
          call pick_size(a, sv)
          k = a%k
@@ -597,10 +595,10 @@ contains
          if (nlev > 1) then
             lev = a%rng%below(width_levels)
             a%k = a%kk + (lev - 1) * (nkind_sieve(sv) / nlev)
-            a%w = cfg%min_width(sv) + (lev - 0.5_wp) * (cfg%max_width(sv) - cfg%min_width(sv)) / width_levels
+            a%w = cfg%sieves%min_width(sv) + (lev - 0.5_wp) * (cfg%sieves%max_width(sv) - cfg%sieves%min_width(sv)) / width_levels
          else
             a%k = a%kk
-            a%w = a%rng%uniform_range(cfg%min_width(sv), cfg%max_width(sv))
+            a%w = a%rng%uniform_range(cfg%sieves%min_width(sv), cfg%sieves%max_width(sv))
          end if
       end subroutine pick_size
 
@@ -742,16 +740,16 @@ contains
       character(len=512), allocatable :: src(:)
       integer :: s, nset, k, i, ns, nlev, lev, total, n, j
 
-      allocate (set_of(cfg%nsieve), src(cfg%nsieve))
+      allocate (set_of(cfg%sieves%nsieve), src(cfg%sieves%nsieve))
       nset = 0
-      do s = 1, cfg%nsieve
+      do s = 1, cfg%sieves%nsieve
          set_of(s) = 0
          do i = 1, nset
-            if (src(i) == cfg%source(s)) set_of(s) = i
+            if (src(i) == cfg%sieves%source(s)) set_of(s) = i
          end do
          if (set_of(s) == 0) then
             nset = nset + 1
-            src(nset) = cfg%source(s)
+            src(nset) = cfg%sieves%source(s)
             set_of(s) = nset
          end if
       end do
@@ -759,7 +757,7 @@ contains
       total = 0
       do i = 1, nset
          if (trim(src(i)) == "synthetic") then
-            call synthetic_shapes(cfg%synthetic, cfg%seed, cfg%synthetic_count, sets(i), error)
+            call synthetic_shapes(cfg%synthetic%params, cfg%run%seed, cfg%synthetic%count, sets(i), error)
          else if (trim(src(i)) == "sphere") then
             allocate (sets(i)%names(1), sets(i)%shapes(1))
             sets(i)%names(1)%s = "sphere"
@@ -783,16 +781,16 @@ contains
       end do
 
       nlev = 1
-      if (cfg%nlayer > 0 .and. cfg%thickness_unit == "mm") nlev = width_levels
-      allocate (first_kind(cfg%nsieve), nkind_sieve(cfg%nsieve))
+      if (cfg%shells%nlayer > 0 .and. cfg%shells%unit == thickness_unit%mm) nlev = width_levels
+      allocate (first_kind(cfg%sieves%nsieve), nkind_sieve(cfg%sieves%nsieve))
       n = 0
-      do s = 1, cfg%nsieve
+      do s = 1, cfg%sieves%nsieve
          first_kind(s) = n + 1
          nkind_sieve(s) = size(sets(set_of(s))%shapes) * nlev
          n = n + nkind_sieve(s)
       end do
       allocate (kinds(n))
-      do s = 1, cfg%nsieve
+      do s = 1, cfg%sieves%nsieve
          ns = size(sets(set_of(s))%shapes)
          do lev = 1, nlev
             do k = 1, ns
@@ -801,7 +799,7 @@ contains
                kinds(i)%sieve = s
                kinds(i)%level = merge(lev, 0, nlev > 1)
                kinds(i)%order = model%shapes(kinds(i)%shape)%nmax
-               if (cfg%order(s) >= 0) kinds(i)%order = min(cfg%order(s), kinds(i)%order)
+               if (cfg%sieves%order(s) >= 0) kinds(i)%order = min(cfg%sieves%order(s), kinds(i)%order)
             end do
          end do
       end do
@@ -884,7 +882,7 @@ contains
    pure real(wp) function level_width(cfg, kd) result(w)
       type(run_config_type), intent(in) :: cfg
       type(particle_kind_type), intent(in) :: kd
-      w = cfg%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%max_width(kd%sieve) - cfg%min_width(kd%sieve)) &
+      w = cfg%sieves%min_width(kd%sieve) + (kd%level - 0.5_wp) * (cfg%sieves%max_width(kd%sieve) - cfg%sieves%min_width(kd%sieve)) &
           / width_levels
    end function level_width
 
@@ -905,19 +903,18 @@ contains
       kd%width = g%width
       kd%length = g%length
       kd%volume = g%volume
-      call new_contact_body(kd%body, s, error, next=cfg%n_ext)
+      call new_contact_body(kd%body, s, error, next=cfg%parking%n_ext)
       if (allocated(error)) return
       kd%r_out = kd%body%r_max
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
-      if (cfg%nlayer == 0) return
-      if (cfg%thickness_unit == "mm") then
+      if (cfg%shells%nlayer == 0) return
+      sc = 1.0_wp
+      if (cfg%shells%unit == thickness_unit%mm) then
          w = level_width(cfg, kd)
          sc = w / kd%width
-         t = cfg%thickness / sc
-      else
-         t = cfg%thickness * kd%length
       end if
+      t = thickness_to_shape_units(cfg%shells%thickness, cfg%shells%unit, kd%length, sc)
       call build_layers(s, t, kd%layers, reports, error, label=name)
       if (allocated(error)) then
          error%message = cfg%file//": &shells: "//error%message
@@ -928,12 +925,12 @@ contains
          kd%layer_volume(k) = reports(k)%outer_volume
       end do
       ! overlapping shells do not take part in the parking: no contact body for them
-      if (cfg%mode == shell_mode%overlap) return
+      if (cfg%shells%mode == shell_mode%overlap) return
       allocate (kd%shell_body)
-      call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=cfg%n_ext)
+      call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=cfg%parking%n_ext)
       if (allocated(error)) return
       kd%r_out = max(kd%r_out, kd%shell_body%r_max)
       kd%r_in_query = kd%shell_body%r_min
-      if (cfg%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
+      if (cfg%shells%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
    end subroutine prepare_one
 end module anm_parking_engine
