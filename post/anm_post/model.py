@@ -36,6 +36,9 @@ class Model:
         shell_thickness: (np, nshell) cumulative outer distance of each layer (mm), nshell may be 0.
         sieves: per-sieve arrays min_width, max_width, target_fraction, achieved_fraction, count.
         attrs: run attributes (seed, threads, ...).
+        shells: the shell specification of the run (group /shells): dict with thickness (nlayer,)
+            cumulative, in unit; unit "mm" or "fraction"; mode "exclude", "shell_overlap" or
+            "overlap"; colour (nlayer, 3). None for files written before /shells existed.
     """
 
     path: Path
@@ -53,6 +56,7 @@ class Model:
     shell_thickness: np.ndarray
     sieves: dict[str, np.ndarray]
     attrs: dict[str, object] = field(default_factory=dict)
+    shells: dict | None = None
 
     @property
     def n_particles(self) -> int:
@@ -108,6 +112,7 @@ def read_model(path: str | Path) -> Model:
                       ("min_width", "max_width", "target_fraction", "achieved_fraction", "count")}
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in fh["run"].attrs.items()} \
                 if "run" in fh else {}
+            spec = _read_shells(fh) if "shells" in fh else None
         except (KeyError, ValueError, TypeError) as exc:
             raise AnmPostError(f"{path}: malformed model file ({exc})") from None
     npart = shape.size
@@ -122,9 +127,36 @@ def read_model(path: str | Path) -> Model:
         "particles/nmax": nmax.shape == (npart,) and bool(np.all(nmax >= 0)),
         "particles/sieve": sieve.shape == (npart,),
     }
+    if spec is not None and spec["nlayer"] > 0:
+        checks["particles/shell_thickness"] = shells.shape == (npart, spec["nlayer"])
     for name, ok in checks.items():
         if not ok:
             raise AnmPostError(f"{path}::/{name}: wrong shape or values")
     return Model(path=path, box=box, periodic=periodic, shape_coeffs=coeffs, shape_nmax=snmax, shape_names=names,
                  shape=shape, center=center, rotation=rotation, scale=scale, nmax=nmax, sieve=sieve,
-                 shell_thickness=shells, sieves=sieves, attrs=attrs)
+                 shell_thickness=shells, sieves=sieves, attrs=attrs, shells=spec)
+
+
+def _text(value) -> str:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray):
+        return _text(value.reshape(-1)[0])
+    return str(value)
+
+
+def _read_shells(fh) -> dict:
+    """The group /shells: attributes nlayer, unit, mode; datasets thickness, colour."""
+    g = fh["shells"]
+    nlayer = int(np.asarray(g.attrs["nlayer"]).reshape(-1)[0])
+    unit = _text(g.attrs["unit"]).strip()
+    mode = _text(g.attrs["mode"]).strip()
+    if nlayer > 0:
+        thickness = np.asarray(g["thickness"][()], dtype=np.float64).reshape(-1)
+        colour = np.asarray(g["colour"][()], dtype=np.float64).reshape(-1, 3)
+    else:
+        thickness, colour = np.zeros(0), np.zeros((0, 3))
+    if thickness.size != nlayer or colour.shape[0] != nlayer or unit not in ("mm", "fraction"):
+        raise ValueError(f"/shells: nlayer {nlayer}, unit {unit!r}, {thickness.size} thicknesses, "
+                         f"{colour.shape[0]} colours do not agree")
+    return {"nlayer": nlayer, "thickness": thickness, "unit": unit, "mode": mode, "colour": colour}
