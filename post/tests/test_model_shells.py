@@ -79,7 +79,7 @@ def labels(tmp_path, path, *extra, name="l.npz"):
 
 
 def test_slice_defaults_to_the_stored_shells(anm_bin, tmp_path):
-    path = park(anm_bin, tmp_path)
+    path = park(anm_bin, tmp_path, "fraction", 0.05, 0.1)     # layers of 2-8 pixels
     default = labels(tmp_path, path, name="d.npz")
     assert set(np.unique(default["layer"])) >= {1, 2}
     same = labels(tmp_path, path, "--shells", "model", name="m.npz")
