@@ -9,6 +9,7 @@ program tester
    use test_shapes, only: collect_shapes
    use test_geometry, only: collect_geometry
    use test_io, only: collect_io
+   use test_config, only: collect_config
    use test_parking, only: collect_parking
    use test_packing, only: collect_packing
    use test_shells, only: collect_shells
@@ -25,8 +26,8 @@ program tester
 
    suites = [new_testsuite("core", collect_core), new_testsuite("sh", collect_sh), &
              new_testsuite("shapes", collect_shapes), new_testsuite("geometry", collect_geometry), &
-             new_testsuite("io", collect_io), new_testsuite("parking", collect_parking), &
-             new_testsuite("packing", collect_packing), &
+             new_testsuite("io", collect_io), new_testsuite("config", collect_config), &
+             new_testsuite("parking", collect_parking), new_testsuite("packing", collect_packing), &
              new_testsuite("shells", collect_shells), &
              new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing), &
              new_testsuite("audit", collect_audit), new_testsuite("cli", collect_cli), &

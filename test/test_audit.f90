@@ -9,7 +9,7 @@ module test_audit
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape
    use anm_geometry_rotation, only: random_rotation
-   use anm_parking_config, only: run_config_type, read_config
+   use anm_config_job, only: run_config_type, read_config
    use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none

@@ -1,11 +1,10 @@
-!> Tests of the namelist configuration (valid input and every kind of bad input, each a named
-!> error) and of the HDF5 model file (round trip, atomic write, bad files).
+!> Tests of the HDF5 model file (round trip, atomic write, bad files, the shell specification
+!> and the 64-bit seed). The namelist configuration is tested in test_config.
 module test_io
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_geometry_rotation, only: rotation_about_axis
-   use anm_parking_config, only: run_config_type, read_config, resolved_namelist, shell_mode
    use anm_io_model, only: model_type, write_model, read_model
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
@@ -20,14 +19,6 @@ contains
    subroutine collect_io(tests)
       type(unittest_type), allocatable, intent(out) :: tests(:)
       tests = [ &
-              new_unittest("valid namelist is resolved", test_valid), &
-              new_unittest("share mode multiplies by the total fraction", test_share), &
-              new_unittest("unknown variable is named", test_unknown_variable), &
-              new_unittest("wrong type is refused", test_wrong_type), &
-              new_unittest("fractions above 1 are refused", test_fraction_sum), &
-              new_unittest("a particle wider than the box is refused", test_too_wide), &
-              new_unittest("negative width is refused", test_negative_width), &
-              new_unittest("missing group and file are refused", test_missing_group), &
               new_unittest("model file round trip", test_model_round_trip), &
               new_unittest("model file errors name the file", test_model_errors)]
    end subroutine collect_io
@@ -40,97 +31,6 @@ contains
       write (unit, '(a)') text
       close (unit)
    end subroutine write_text
-
-   function base_nml() result(text)
-      character(len=:), allocatable :: text
-      text = "&box length = 20, 20, 20, periodic = .true. /"//new_line("a")// &
-             "&sieves nsieve = 2, min_width = 4.0, 1.0, max_width = 5.0, 2.0, fraction = 0.2, 0.1 /"//new_line("a")
-   end function base_nml
-
-   subroutine expect_error(error, name, text, fragment)
-      type(error_type), allocatable, intent(out) :: error
-      character(len=*), intent(in) :: name, text, fragment
-      type(run_config_type) :: cfg
-      type(error_type), allocatable :: err
-      call write_text(name, text)
-      call read_config(tmpdir//"/"//name, cfg, err)
-      call check(error, allocated(err), "no error for "//name)
-      if (allocated(error)) return
-      print '(a)', "        refused as expected: "//err%message
-      call check(error, index(err%message, tmpdir//"/"//name) > 0, "message must name the file: "//err%message)
-      if (allocated(error)) return
-      call check(error, index(err%message, fragment) > 0, "message must contain '"//fragment//"': "//err%message)
-   end subroutine expect_error
-
-   subroutine test_valid(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(run_config_type) :: cfg
-      call write_text("valid.nml", base_nml()//"&shells nlayer = 1, thickness = 0.02 /"//new_line("a") &
-                      //"&run seed = 42 /")
-      call read_config(tmpdir//"/valid.nml", cfg, error)
-      if (allocated(error)) return
-      call check(error, cfg%nsieve, 2, "nsieve")
-      if (allocated(error)) return
-      call check(error, cfg%target_fraction(2), 0.1_wp, "fraction")
-      if (allocated(error)) return
-      call check(error, cfg%seed == 42_i8 .and. cfg%nlayer == 1 .and. cfg%mode == shell_mode%exclude, "seed/shells")
-      if (allocated(error)) return
-      call check(error, cfg%max_locations, 2000, "default max_locations")
-      if (allocated(error)) return
-      call check(error, index(resolved_namelist(cfg), "max_locations = 2000") > 0, "defaults written back")
-   end subroutine test_valid
-
-   subroutine test_share(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(run_config_type) :: cfg
-      call write_text("share.nml", "&box length = 66, 66, 66 /"//new_line("a")// &
-                      "&sieves nsieve = 2, min_width = 10, 9, max_width = 11, 10, fraction = 0.5, 0.5, " &
-                      //"fraction_mode = 'share', total_fraction = 0.25 /")
-      call read_config(tmpdir//"/share.nml", cfg, error)
-      if (allocated(error)) return
-      call check(error, cfg%target_fraction(1), 0.125_wp, "share times total")
-   end subroutine test_share
-
-   subroutine test_unknown_variable(error)
-      type(error_type), allocatable, intent(out) :: error
-      call expect_error(error, "unknown.nml", base_nml()//"&parking max_locatoins = 5 /", "max_locatoins")
-   end subroutine test_unknown_variable
-
-   subroutine test_wrong_type(error)
-      type(error_type), allocatable, intent(out) :: error
-      call expect_error(error, "type.nml", base_nml()//"&parking max_locations = 'many' /", "&parking")
-   end subroutine test_wrong_type
-
-   subroutine test_fraction_sum(error)
-      type(error_type), allocatable, intent(out) :: error
-      call expect_error(error, "sum.nml", "&box length = 20, 20, 20 /"//new_line("a")// &
-                        "&sieves nsieve = 2, min_width = 4.0, 1.0, max_width = 5.0, 2.0, fraction = 0.7, 0.6 /", &
-                        "fraction")
-   end subroutine test_fraction_sum
-
-   subroutine test_too_wide(error)
-      type(error_type), allocatable, intent(out) :: error
-      call expect_error(error, "wide.nml", "&box length = 20, 20, 4 /"//new_line("a")// &
-                        "&sieves nsieve = 1, min_width = 4.0, max_width = 5.0, fraction = 0.2 /", "max_width(1)")
-   end subroutine test_too_wide
-
-   subroutine test_negative_width(error)
-      type(error_type), allocatable, intent(out) :: error
-      call expect_error(error, "negative.nml", "&box length = 20, 20, 20 /"//new_line("a")// &
-                        "&sieves nsieve = 1, min_width = -1.0, max_width = 5.0, fraction = 0.2 /", "min_width(1)")
-   end subroutine test_negative_width
-
-   subroutine test_missing_group(error)
-      type(error_type), allocatable, intent(out) :: error
-      type(run_config_type) :: cfg
-      type(error_type), allocatable :: err
-      call expect_error(error, "nosieves.nml", "&box length = 20, 20, 20 /", "&sieves")
-      if (allocated(error)) return
-      call read_config(tmpdir//"/does-not-exist.nml", cfg, err)
-      call check(error, allocated(err), "missing file accepted")
-      if (allocated(error)) return
-      call check(error, index(err%message, "does-not-exist.nml") > 0, "names the file")
-   end subroutine test_missing_group
 
    subroutine test_model_round_trip(error)
       type(error_type), allocatable, intent(out) :: error
@@ -160,6 +60,11 @@ contains
       m%achieved_fraction = [0.19_wp, 0.1_wp]
       m%count = [2, 1]
       m%namelist = "&box length = 10, 11, 12 /"
+      m%seed = 5000000000_i8
+      m%layer_thickness = [0.01_wp]
+      m%layer_colour = reshape([0.1_wp, 0.2_wp, 0.3_wp], [3, 1])
+      m%layer_unit = "fraction"
+      m%layer_mode = "overlap"
       m%version = "test"
       call execute_command_line("mkdir -p "//tmpdir)
       call write_model(tmpdir//"/round.h5", m, error)
@@ -179,6 +84,12 @@ contains
       call check(error, maxval(abs(r%shapes(2)%a - m%shapes(2)%a)), 0.0_wp, "coefficients", thr=1.0e-15_wp)
       if (allocated(error)) return
       call check(error, trim(r%shape_names(2)) == "ellipsoid" .and. r%namelist == m%namelist, "strings")
+      if (allocated(error)) return
+      call check(error, allocated(r%layer_unit), "/shells read back")
+      if (allocated(error)) return
+      call check(error, r%layer_unit == "fraction" .and. r%layer_mode == "overlap" .and. size(r%layer_thickness) == 1 &
+                 .and. all(r%layer_colour == m%layer_colour) .and. all(r%layer_thickness == m%layer_thickness), &
+                 "shell specification round trip")
    end subroutine test_model_round_trip
 
    subroutine test_model_errors(error)

@@ -10,7 +10,7 @@ module test_parking
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_geometry_rotation, only: random_rotation
-   use anm_parking_config, only: run_config_type, read_config
+   use anm_config_job, only: run_config_type, read_config
    use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_io_model, only: write_model, read_model
    use omp_lib, only: omp_set_num_threads, omp_get_max_threads

@@ -87,27 +87,45 @@ def _plane_from_args(args: argparse.Namespace, model):
     return axis_plane(model, args.axis, args.position, args.pixel)
 
 
+def _shell_spec(args: argparse.Namespace, model, ids):
+    """The one meaning of --shells: the shell layers. Absent or `model`: the layers stored in the
+    model (group /shells; none for files that have no such group); `none`: no shells;
+    T1[,T2..]: these cumulative thicknesses in --shell-unit."""
+    from .slicing import ShellSpec
+    choice = "model" if args.shells is None else args.shells.strip()
+    if choice.lower() == "none":
+        return None
+    if choice.lower() == "model":
+        try:
+            spec = ShellSpec.stored(model, particles=ids)
+        except AnmPostError as exc:
+            raise AnmPostError(f"--shells: {exc}") from None
+        if spec is None and args.shells is not None:
+            raise AnmPostError(f"--shells: {model.path} stores no shell layers (no /shells group or nlayer = 0); "
+                               "give the thicknesses, e.g. --shells 0.02")
+        return spec
+    try:
+        return ShellSpec(_floats(choice, "--shells"), unit=args.shell_unit, particles=ids)
+    except AnmPostError as exc:
+        raise AnmPostError(f"--shells/--shell-particles: {exc}") from None
+
+
 def _cmd_slice(args: argparse.Namespace) -> int:
     from .model import read_model
-    from .slicing import Slicer, ShellSpec
+    from .slicing import Slicer
     from .images import save_slice_png
 
     if not (args.pixel > 0 and np.isfinite(args.pixel)):
         raise AnmPostError(f"--pixel: must be a positive size in mm, got {args.pixel}")
     model = read_model(args.model)
-    shells = None
-    if args.shells:
-        ids = None
-        if args.shell_particles:
-            try:
-                ids = tuple(int(x) for x in args.shell_particles.split(","))
-            except ValueError:
-                raise AnmPostError(f"--shell-particles: expected comma-separated ids, got {args.shell_particles!r}") \
-                    from None
+    ids = None
+    if args.shell_particles:
         try:
-            shells = ShellSpec(_floats(args.shells, "--shells"), unit=args.shell_unit, particles=ids)
-        except AnmPostError as exc:
-            raise AnmPostError(f"--shells/--shell-particles: {exc}") from None
+            ids = tuple(int(x) for x in args.shell_particles.split(","))
+        except ValueError:
+            raise AnmPostError(f"--shell-particles: expected comma-separated ids, got {args.shell_particles!r}") \
+                from None
+    shells = _shell_spec(args, model, ids)
     nlayer = 0 if shells is None else len(shells.thickness)
     try:
         slicer = Slicer(model, shells)
@@ -202,12 +220,12 @@ def _rdf_spec(args: argparse.Namespace):
             raise AnmPostError(f"--sieves: expected comma-separated 0-based sieve numbers, got {args.sieves!r}") \
                 from None
     try:
-        return RdfSpec(particle=args.particle, n_shells=args.shells, t_min=args.t_min, t_max=args.t_max,
+        return RdfSpec(particle=args.particle, n_shells=args.bins, t_min=args.t_min, t_max=args.t_max,
                        unit=args.unit, axis=args.axis, pixel=args.pixel, density=getattr(args, "density", 1.0),
                        small_sieves=sieves, small_below=args.below, phi_b=args.phi_b)
     except AnmPostError as exc:
         text = str(exc)
-        option = next((o for key, o in (("number of shells", "--shells"), ("shell distances", "--t-min/--t-max"),
+        option = next((o for key, o in (("number of shells", "--bins"), ("shell distances", "--t-min/--t-max"),
                                         ("pixel", "--pixel"), ("density", "--density"), ("bulk", "--phi-b"))
                        if key in text), "options")
         raise AnmPostError(f"{option}: {text}") from None
@@ -219,9 +237,16 @@ def _check_particle(args: argparse.Namespace, model) -> None:
                            f"(0..{model.n_particles - 1})")
 
 
+def _no_shells_option(args: argparse.Namespace) -> None:
+    if getattr(args, "shells", None) is not None:
+        raise AnmPostError("--shells: means the shell layers (slice, sweep); the number of distance shells of "
+                           "g(t) is --bins K")
+
+
 def _cmd_rdf(args: argparse.Namespace) -> int:
     from .model import read_model
     from .walleffect import plot_rdf, prepare, rdf, volume_fractions
+    _no_shells_option(args)
     spec = _rdf_spec(args)
     model = read_model(args.model)
     _check_particle(args, model)
@@ -271,6 +296,7 @@ def _check_rdf_memory(st, spec, densities, args: argparse.Namespace) -> None:
 def _cmd_convergence(args: argparse.Namespace) -> int:
     from .model import read_model
     from .walleffect import convergence, plot_convergence
+    _no_shells_option(args)
     spec = _rdf_spec(args)
     dens = _floats(args.densities, "--densities")
     layers = [int(x) for x in _floats(args.layers, "--layers")] if args.layers else None
@@ -313,19 +339,25 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if not np.isfinite(args.scale) or args.scale == 0:
         raise AnmPostError(f"--scale: must be a finite non-zero number, got {args.scale}")
     rows = collect(runs)
+    choice = "auto" if args.shells is None else args.shells.strip().lower()
+    if choice not in ("auto", "model", "none"):
+        raise AnmPostError(f"--shells: sweep shows the runs' own shells: use --shells (or --shells model) to add the "
+                           f"shell fraction panel, --shells none to leave it out; got {args.shells!r}")
+    show_shells = choice == "model" or (choice == "auto" and any(r.shell_fraction > 0 for r in rows))
     text = sweep_markdown(rows, args.label, args.scale)
     sys.stdout.write(text)
     if args.markdown:
         write_text(args.markdown, text, "--markdown")
     if args.png:
-        plot_sweep(rows, args.label, args.png, args.scale, shells=args.shells)
+        plot_sweep(rows, args.label, args.png, args.scale, shells=show_shells)
     return 0
 
 
 def _rdf_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model file written by `anm run` (.h5)")
     p.add_argument("--particle", type=int, metavar="ID", help="0-based id of the RDF particle (default: the longest)")
-    p.add_argument("--shells", type=int, default=10, metavar="K", help="number of shells K (default 10)")
+    p.add_argument("--bins", type=int, default=10, metavar="K", help="number of distance shells K of g(t) (default 10)")
+    p.add_argument("--shells", nargs="?", const="model", help=argparse.SUPPRESS)
     p.add_argument("--t-min", type=float, default=0.005, metavar="T", help="innermost shell distance (default 0.005)")
     p.add_argument("--t-max", type=float, default=0.05, metavar="T", help="outermost shell distance (default 0.05)")
     p.add_argument("--unit", choices=["fraction", "mm"], default="fraction",
@@ -373,10 +405,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--density", type=float, metavar="RHO",
                    help="stack of parallel slices along --axis at slice density rho_s in (0, 1]; prints a CSV of "
                         "area fractions per slice")
-    p.add_argument("--shells", metavar="T1[,T2..]",
-                   help="grow shells for the slice: cumulative outer distances of the layers from the surface")
+    p.add_argument("--shells", nargs="?", const="model", metavar="model|none|T1[,T2..]",
+                   help="shell layers of the slice: by default (or `model`) the layers stored in the model "
+                        "(/shells, the engine's per-particle thicknesses); `none`: no shells; T1[,T2..]: grow "
+                        "these cumulative outer distances from the surface instead")
     p.add_argument("--shell-unit", choices=["fraction", "mm"], default="fraction",
-                   help="unit of --shells: fraction of each particle's length (default) or mm")
+                   help="unit of explicit --shells values: fraction of each particle's length (default) or mm")
     p.add_argument("--shell-particles", metavar="ID[,ID..]", help="grow shells only around these 0-based particles")
     p.add_argument("--png", metavar="FILE", help="write the picture (with a legend) to FILE")
     p.add_argument("--labels", metavar="FILE", help="write the label arrays to FILE (.npz, .h5)")
@@ -425,7 +459,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=1.0, help="multiply the values by this for display (e.g. 100)")
     p.add_argument("--markdown", metavar="FILE", help="write the table to FILE")
     p.add_argument("--png", metavar="FILE", help="write the plot to FILE")
-    p.add_argument("--shells", action="store_true", help="add the shell volume fraction panel (Fig 2.17)")
+    p.add_argument("--shells", nargs="?", const="model", metavar="model|none",
+                   help="shell volume fraction panel (Fig 2.17): shown by default when the runs have shells; "
+                        "`--shells` or `--shells model` always, `--shells none` never")
     p.set_defaults(func=_cmd_sweep)
     return parser
 

@@ -37,6 +37,9 @@ class Model:
         shell_thickness: (np, nshell) cumulative outer distance of each layer (mm), nshell may be 0.
         sieves: per-sieve arrays min_width, max_width, target_fraction, achieved_fraction, count.
         attrs: run attributes (seed, threads, ...).
+        shells: the shell specification of the run (group /shells): dict with thickness (nlayer,)
+            cumulative, in unit; unit "mm" or "fraction"; mode "exclude", "shell_overlap" or
+            "overlap"; colour (nlayer, 3). None for files written before /shells existed.
     """
 
     path: Path
@@ -54,6 +57,7 @@ class Model:
     shell_thickness: np.ndarray
     sieves: dict[str, np.ndarray]
     attrs: dict[str, object] = field(default_factory=dict)
+    shells: dict | None = None
 
     @property
     def n_particles(self) -> int:
@@ -151,6 +155,8 @@ def read_model(path: str | Path) -> Model:
                 for k in ("namelist", "resolved_namelist"):
                     if k in fh["run"] and isinstance(fh["run"][k], h5py.Dataset):
                         attrs[k] = text(fh["run"][k][()], f"{path}::/run/{k}")
+            name = "shells"
+            spec = _read_shells(fh, path) if "shells" in fh else None
         except AnmPostError:
             raise
         except (KeyError, ValueError, TypeError, OSError) as exc:
@@ -158,6 +164,26 @@ def read_model(path: str | Path) -> Model:
     attrs["format_version"] = version
     model = Model(path=path, box=box, periodic=periodic, shape_coeffs=coeffs, shape_nmax=snmax, shape_names=names,
                   shape=shape, center=center, rotation=rotation, scale=scale, nmax=nmax, sieve=sieve,
-                  shell_thickness=shells, sieves=sieves, attrs=attrs)
+                  shell_thickness=shells, sieves=sieves, attrs=attrs, shells=spec)
     validate_model(model)
+    if spec is not None and spec["nlayer"] > 0 and shells.shape != (shape.size, spec["nlayer"]):
+        raise AnmPostError(f"{path}::/particles/shell_thickness: shape {shells.shape} does not match "
+                           f"/shells nlayer = {spec['nlayer']}")
     return model
+
+
+def _read_shells(fh, path) -> dict:
+    """The group /shells: attributes nlayer, unit, mode; datasets thickness, colour."""
+    g = fh["shells"]
+    nlayer = int(np.asarray(g.attrs["nlayer"]).reshape(-1)[0])
+    unit = text(g.attrs["unit"], f"{path}::/shells attribute 'unit'").strip()
+    mode = text(g.attrs["mode"], f"{path}::/shells attribute 'mode'").strip()
+    if nlayer > 0:
+        thickness = np.asarray(g["thickness"][()], dtype=np.float64).reshape(-1)
+        colour = np.asarray(g["colour"][()], dtype=np.float64).reshape(-1, 3)
+    else:
+        thickness, colour = np.zeros(0), np.zeros((0, 3))
+    if thickness.size != nlayer or colour.shape[0] != nlayer or unit not in ("mm", "fraction"):
+        raise ValueError(f"/shells: nlayer {nlayer}, unit {unit!r}, {thickness.size} thicknesses, "
+                         f"{colour.shape[0]} colours do not agree")
+    return {"nlayer": nlayer, "thickness": thickness, "unit": unit, "mode": mode, "colour": colour}

@@ -118,12 +118,29 @@ class ShellSpec:
     surface, in mm or as a fraction of each particle's length, around all particles (particles
     None) or the listed ones (0-based ids). With unit "mm" the distance in shape units, t / scale,
     is rounded to a geometric ladder of relative step `step` (default 2 %, so at most 1 % off) so
-    that particles of one shape and order share their shells."""
+    that particles of one shape and order share their shells.
+
+    `ShellSpec.stored(model)` is the specification the model was parked with (group /shells):
+    its layers are then taken per particle from /particles/shell_thickness (mm, as the engine
+    computed them), not recomputed, so the slice shows the shells the parking used."""
 
     thickness: tuple[float, ...]
     unit: str = "fraction"
     particles: tuple[int, ...] | None = None
     step: float = 0.02
+    from_model: bool = False
+
+    @classmethod
+    def stored(cls, model: Model, particles: tuple[int, ...] | None = None) -> "ShellSpec | None":
+        """The model's own shell layers, or None when it has none (or predates /shells)."""
+        spec = model.shells
+        if spec is None or spec["nlayer"] == 0:
+            return None
+        if model.shell_thickness.shape != (model.n_particles, spec["nlayer"]):
+            raise AnmPostError(f"{model.path}::/particles/shell_thickness: expected ({model.n_particles}, "
+                               f"{spec['nlayer']}) values for the layers of /shells")
+        return cls(tuple(float(t) for t in spec["thickness"]), unit=spec["unit"], particles=particles,
+                   from_model=True)
 
     def __post_init__(self) -> None:
         t = np.asarray(self.thickness, float)
@@ -252,6 +269,9 @@ class Slicer:
     def _shell_shape_units(self, ids: np.ndarray) -> np.ndarray:
         """Cumulative layer distances (len(ids), nlayer) in shape units, quantised for mm."""
         spec = self.shells
+        if spec.from_model:
+            # the engine's own values (mm): one conversion, no second rounding
+            return self.model.shell_thickness[ids] / self.model.scale[ids][:, None]
         t = np.asarray(spec.thickness, float)
         if spec.unit == "fraction":
             return self.lengths()[self._form[ids]][:, None] * t[None, :]

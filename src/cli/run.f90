@@ -8,7 +8,8 @@ module anm_cli_run
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_core_filesystem, only: make_directory, join_path
-   use anm_parking_config, only: run_config_type, read_config
+   use anm_config_job, only: run_config_type, read_config
+   use anm_config_shells, only: thickness_unit_keyword, shell_mode_name
    use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_parking_summary, only: write_summary, write_summary_csv
    use anm_io_model, only: model_type, write_model
@@ -44,28 +45,33 @@ contains
 
       call read_config(path, cfg, error)
       if (allocated(error)) return
-      dir = trim(cfg%directory)
+      dir = trim(cfg%output%directory)
       call make_directory(dir, error)
       if (allocated(error)) then
          error%message = path//": &output: directory: "//error%message
          return
       end if
-      base = join_path(dir, trim(cfg%name))
+      base = join_path(dir, trim(cfg%output%name))
       call run_parking(cfg, model, kinds, kind_of, error, progress_unit)
       if (allocated(error)) return
       model%version = anm_version
+      ! the shell specification travels with the model (/shells)
+      model%layer_thickness = cfg%shells%thickness
+      model%layer_colour = cfg%shells%colour
+      model%layer_unit = thickness_unit_keyword(cfg%shells%unit)
+      model%layer_mode = shell_mode_name(cfg%shells%mode)
       if (present(threads)) model%threads = threads
       call write_model(base//".h5", model, error)
       if (allocated(error)) return
       call write_summary(out_unit, model)
       call write_summary_csv(base//"-summary.csv", model, error)
       if (allocated(error)) return
-      if (cfg%vrml) then
+      if (cfg%output%vrml) then
          call write_model_vrml(cfg, model, kinds, kind_of, base, error)
          if (allocated(error)) return
       end if
       write (out_unit, '(a)') "model: "//base//".h5; summary: "//base//"-summary.csv"// &
-         merge("; VRML: "//base//".wrl", repeat(" ", len(base) + 12), cfg%vrml)
+         merge("; VRML: "//base//".wrl", repeat(" ", len(base) + 12), cfg%output%vrml)
    end subroutine run_job
 
    subroutine write_model_vrml(cfg, model, kinds, kind_of, base, error)
@@ -84,21 +90,21 @@ contains
       character(len=:), allocatable :: name
 
       nk = size(kinds)
-      nlay = cfg%nlayer
+      nlay = cfg%shells%nlayer
       allocate (meshes(nk * (1 + nlay)))
       do k = 1, nk
          meshes(k)%shape = kinds(k)%body%shape
-         meshes(k)%tess = cfg%tessellation(kinds(k)%sieve)
+         meshes(k)%tess = cfg%output%tessellation(kinds(k)%sieve)
          meshes(k)%colour = palette(:, 1 + mod(kinds(k)%sieve - 1, 6))
          do l = 1, nlay
             meshes(l * nk + k)%shape = sh_truncate(kinds(k)%layers(l), kinds(k)%layers(l)%nmax)
-            meshes(l * nk + k)%tess = cfg%tessellation(kinds(k)%sieve)
-            meshes(l * nk + k)%colour = cfg%colour(:, l)
+            meshes(l * nk + k)%tess = cfg%output%tessellation(kinds(k)%sieve)
+            meshes(l * nk + k)%colour = cfg%shells%colour(:, l)
             meshes(l * nk + k)%transparency = 0.6_wp
          end do
       end do
       nfile = 1
-      if (cfg%vrml_per_layer .and. nlay > 0) nfile = nlay + 1
+      if (cfg%output%vrml_per_layer .and. nlay > 0) nfile = nlay + 1
       do f = 1, nfile
          if (nfile == 1) then
             n = model%np * (1 + nlay)

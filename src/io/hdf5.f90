@@ -39,7 +39,7 @@ module anm_io_hdf5
 
    !> Write an attribute of a group or dataset.
    interface h5_write_attr
-      module procedure :: attr_int, attr_real, attr_string
+      module procedure :: attr_int, attr_int64, attr_real, attr_string
    end interface h5_write_attr
 
    !> Read a dataset.
@@ -310,6 +310,30 @@ contains
       call h5aclose_f(aid, st)
       call h5sclose_f(space, st)
    end subroutine attr_int
+
+   !> A 64-bit integer attribute (stored as int64, e.g. the seed).
+   subroutine attr_int64(file, path, name, val, error)
+      use, intrinsic :: iso_c_binding, only: c_ptr, c_loc
+      use hdf5, only: h5kind_to_type, H5_INTEGER_KIND
+      use anm_core_kinds, only: i8
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path, name
+      integer(i8), intent(in) :: val
+      type(error_type), allocatable, intent(out) :: error
+      integer(i8), target :: buf
+      integer(hid_t) :: aid, space, dtype
+      type(c_ptr) :: ptr
+      integer :: st
+      dtype = h5kind_to_type(i8, H5_INTEGER_KIND)
+      call attr_common(file, path, name, dtype, aid, space, error)
+      if (allocated(error)) return
+      buf = val
+      ptr = c_loc(buf)
+      call h5awrite_f(aid, dtype, ptr, st)
+      call h5aclose_f(aid, st)
+      call h5sclose_f(space, st)
+      if (st /= 0) call fail(error, file, path//"@"//name, "write failed")
+   end subroutine attr_int64
 
    subroutine attr_real(file, path, name, val, error)
       type(h5_file_type), intent(in) :: file

@@ -45,6 +45,13 @@ module anm_io_model
       real(wp), allocatable :: scale(:)
       !> Per particle: cumulative shell thickness per layer (nshell, np), mm.
       real(wp), allocatable :: shell_thickness(:, :)
+      !> Shell specification, per layer: cumulative thickness in `layer_unit` (nlayer).
+      real(wp), allocatable :: layer_thickness(:)
+      !> Shell specification: RGB colour (0..1) per layer (3, nlayer).
+      real(wp), allocatable :: layer_colour(:, :)
+      !> Shell specification: unit of layer_thickness ("mm" or "fraction") and placement mode
+      !> ("exclude", "shell_overlap" or "overlap"); unallocated: no /shells group (older files).
+      character(len=:), allocatable :: layer_unit, layer_mode
       !> Per sieve: width range, target and achieved fraction of the box, count.
       real(wp), allocatable :: min_width(:), max_width(:), target_fraction(:), achieved_fraction(:)
       !> Per sieve: number of particles.
@@ -169,6 +176,11 @@ contains
          if (allocated(error)) goto 99
       end if
 
+      if (allocated(model%layer_unit)) then
+         call write_shells(f, model, error)
+         if (allocated(error)) goto 99
+      end if
+
       call h5_group(f, "/run", error)
       if (allocated(error)) goto 99
       call h5_write(f, "/run/namelist", model%namelist, error)
@@ -177,7 +189,7 @@ contains
          call h5_write(f, "/run/resolved_namelist", model%resolved, error)
          if (allocated(error)) goto 99
       end if
-      call h5_write_attr(f, "/run", "seed", int(model%seed), error)
+      call h5_write_attr(f, "/run", "seed", model%seed, error)
       if (allocated(error)) goto 99
       call h5_write_attr(f, "/run", "threads", model%threads, error)
       if (allocated(error)) goto 99
@@ -195,6 +207,29 @@ contains
       return
 99    call h5_close(f, err2)
    end subroutine write_model
+
+   !> The shell specification as group /shells: attributes nlayer, unit, mode; datasets thickness
+   !> (nlayer, in unit) and colour (nlayer x 3 as numpy reads it). docs/model-file.md.
+   subroutine write_shells(f, model, error)
+      type(h5_file_type), intent(in) :: f
+      type(model_type), intent(in) :: model
+      type(error_type), allocatable, intent(out) :: error
+      integer :: nl
+      nl = 0
+      if (allocated(model%layer_thickness)) nl = size(model%layer_thickness)
+      call h5_group(f, "/shells", error)
+      if (allocated(error)) return
+      call h5_write_attr(f, "/shells", "nlayer", nl, error)
+      if (allocated(error)) return
+      call h5_write_attr(f, "/shells", "unit", model%layer_unit, error)
+      if (allocated(error)) return
+      call h5_write_attr(f, "/shells", "mode", model%layer_mode, error)
+      if (allocated(error)) return
+      if (nl == 0) return
+      call h5_write(f, "/shells/thickness", model%layer_thickness, error)
+      if (allocated(error)) return
+      call h5_write(f, "/shells/colour", model%layer_colour, error)
+   end subroutine write_shells
 
    !> Read a model file (contract version 1). Errors name file::dataset.
    subroutine read_model(path, model, error)
@@ -280,6 +315,10 @@ contains
       else
          allocate (model%shell_thickness(0, model%np))
       end if
+      if (h5_exists(f, "/shells")) then
+         call read_shells(f, model, error)
+         if (allocated(error)) goto 99
+      end if
       call h5_read(f, "/sieves/min_width", model%min_width, error)
       if (allocated(error)) goto 99
       call h5_read(f, "/sieves/max_width", model%max_width, error)
@@ -300,4 +339,31 @@ contains
       return
 99    call h5_close(f, err2)
    end subroutine read_model
+
+   !> Read the optional group /shells (files written before it existed have none).
+   subroutine read_shells(f, model, error)
+      type(h5_file_type), intent(in) :: f
+      type(model_type), intent(inout) :: model
+      type(error_type), allocatable, intent(out) :: error
+      integer :: nl
+      call h5_read_attr(f, "/shells", "nlayer", nl, error)
+      if (allocated(error)) return
+      call h5_read_attr(f, "/shells", "unit", model%layer_unit, error)
+      if (allocated(error)) return
+      call h5_read_attr(f, "/shells", "mode", model%layer_mode, error)
+      if (allocated(error)) return
+      if (nl <= 0) then
+         allocate (model%layer_thickness(0), model%layer_colour(3, 0))
+         return
+      end if
+      call h5_read(f, "/shells/thickness", model%layer_thickness, error)
+      if (allocated(error)) return
+      call h5_read(f, "/shells/colour", model%layer_colour, error)
+      if (allocated(error)) return
+      if (size(model%layer_thickness) /= nl .or. size(model%layer_colour, 1) /= 3 &
+          .or. size(model%layer_colour, 2) /= nl) then
+         call fatal_error(error, f%name//"::/shells: thickness and colour do not match nlayer = "//to_string(nl), &
+                          error_code%format)
+      end if
+   end subroutine read_shells
 end module anm_io_model

@@ -16,10 +16,10 @@
 module anm_parking_engine
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
-   use anm_contact_overlap, only: contact_method
    use anm_shapes_library, only: shape_set_type
    use anm_shapes_source, only: load_shape_source
-   use anm_parking_config, only: run_config_type, resolved_namelist
+   use anm_config_job, only: run_config_type, placement, write_config
+   use anm_shells_thickness, only: thickness_to_mm
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
@@ -72,10 +72,10 @@ contains
       call load_sources(cfg, model, first_shape, nshape, error)
       if (allocated(error)) return
       call new_kind_set(ks, kinds, kind_params(cfg), model%shapes, model%shape_names, first_shape, nshape, &
-                        cfg%order(:cfg%nsieve))
+                        cfg%sieves%order(:cfg%sieves%nsieve))
       call new_packing(pk, packing_params(cfg), kinds)
-      allocate (ap(cfg%nsieve))
-      do s = 1, cfg%nsieve
+      allocate (ap(cfg%sieves%nsieve))
+      do s = 1, cfg%sieves%nsieve
          ap(s) = attempt_params(cfg, ks, s)
       end do
       rp = rsa_params(cfg, progress_unit, max_batch)
@@ -88,12 +88,12 @@ contains
       strategy = parking_strategy%rsa
       select case (strategy)
       case (parking_strategy%rsa)
-         call park_rsa(pk, ks, ap, rp, cfg%target_fraction(:cfg%nsieve), result, run, error)
+         call park_rsa(pk, ks, ap, rp, cfg%sieves%target_fraction(:cfg%sieves%nsieve), result, run, error)
       end select
       if (allocated(error)) return
       call system_clock(t1)
       ! the VRML output draws every kind
-      if (cfg%vrml) then
+      if (cfg%output%vrml) then
          call ks%build(pk%kinds, [(s, s=1, size(pk%kinds))], error)
          if (allocated(error)) return
       end if
@@ -116,23 +116,23 @@ contains
       character(len=512), allocatable :: src(:)
       integer :: s, nset, k, i, total
 
-      allocate (set_of(cfg%nsieve), src(cfg%nsieve))
+      allocate (set_of(cfg%sieves%nsieve), src(cfg%sieves%nsieve))
       nset = 0
-      do s = 1, cfg%nsieve
+      do s = 1, cfg%sieves%nsieve
          set_of(s) = 0
          do i = 1, nset
-            if (src(i) == cfg%source(s)) set_of(s) = i
+            if (src(i) == cfg%sieves%source(s)) set_of(s) = i
          end do
          if (set_of(s) == 0) then
             nset = nset + 1
-            src(nset) = cfg%source(s)
+            src(nset) = cfg%sieves%source(s)
             set_of(s) = nset
          end if
       end do
       allocate (sets(nset), set_first(nset))
       total = 0
       do i = 1, nset
-         call load_shape_source(src(i), cfg%synthetic, cfg%seed, cfg%synthetic_count, sets(i), error)
+         call load_shape_source(src(i), cfg%synthetic%params, cfg%run%seed, cfg%synthetic%count, sets(i), error)
          if (allocated(error)) then
             error%message = cfg%file//": &sieves: source = '"//trim(src(i))//"': "//error%message
             return
@@ -147,8 +147,8 @@ contains
             model%shape_names(set_first(i) + k) = sets(i)%names(k)%s
          end do
       end do
-      allocate (first_shape(cfg%nsieve), nshape(cfg%nsieve))
-      do s = 1, cfg%nsieve
+      allocate (first_shape(cfg%sieves%nsieve), nshape(cfg%sieves%nsieve))
+      do s = 1, cfg%sieves%nsieve
          first_shape(s) = set_first(set_of(s))
          nshape(s) = size(sets(set_of(s))%shapes)
       end do
@@ -159,30 +159,30 @@ contains
       type(run_config_type), intent(in) :: cfg
       type(kind_params_type) :: p
       p%file = cfg%file
-      p%nlayer = cfg%nlayer
-      p%thickness = cfg%thickness
-      p%thickness_mm = cfg%thickness_unit == "mm"
-      p%mode = cfg%mode
-      p%n_ext = cfg%n_ext
-      p%min_width = cfg%min_width(:cfg%nsieve)
-      p%max_width = cfg%max_width(:cfg%nsieve)
+      p%nlayer = cfg%shells%nlayer
+      p%thickness = cfg%shells%thickness
+      p%unit = cfg%shells%unit
+      p%mode = cfg%shells%mode
+      p%n_ext = cfg%parking%n_ext
+      p%min_width = cfg%sieves%min_width(:cfg%sieves%nsieve)
+      p%max_width = cfg%sieves%max_width(:cfg%sieves%nsieve)
    end function kind_params
 
    !> What the packing needs of the configuration.
    pure function packing_params(cfg) result(p)
       type(run_config_type), intent(in) :: cfg
       type(packing_params_type) :: p
-      p%box = cfg%box
-      p%periodic = cfg%periodic
+      p%box = cfg%box%length
+      p%periodic = cfg%box%periodic
       ! a bounding radius is at least half the particle's width (every caliper dimension lies in
       ! the bounding sphere)
-      p%rho_min = 0.5_wp * minval(cfg%min_width(:cfg%nsieve))
-      p%nlayer = cfg%nlayer
-      p%mode = cfg%mode
-      p%contact%method = merge(contact_method%eob, contact_method%newton_raphson, cfg%contact_method == "eob")
-      p%contact%next = cfg%n_ext
-      p%contact%nbox = cfg%n_box
-      p%contact%certified = cfg%certified
+      p%rho_min = 0.5_wp * minval(cfg%sieves%min_width(:cfg%sieves%nsieve))
+      p%nlayer = cfg%shells%nlayer
+      p%mode = cfg%shells%mode
+      p%contact%method = cfg%parking%contact_method
+      p%contact%next = cfg%parking%n_ext
+      p%contact%nbox = cfg%parking%n_box
+      p%contact%certified = cfg%parking%certified
    end function packing_params
 
    !> What the attempt sequences of sieve s need of the configuration.
@@ -191,20 +191,20 @@ contains
       type(kind_set_type), intent(in) :: ks
       integer, intent(in) :: s
       type(attempt_params_type) :: p
-      p%seed = cfg%seed
+      p%seed = cfg%run%seed
       p%sieve = s
-      p%max_locations = cfg%max_locations
-      p%max_orientations = cfg%max_orientations
-      p%max_sizes = cfg%max_sizes
-      p%max_shapes = cfg%max_shapes
+      p%max_locations = cfg%parking%max_locations
+      p%max_orientations = cfg%parking%max_orientations
+      p%max_sizes = cfg%parking%max_sizes
+      p%max_shapes = cfg%parking%max_shapes
       p%first_kind = ks%first(s)
       p%nkind = ks%count(s)
       p%nlev = ks%nlev
-      p%min_width = cfg%min_width(s)
-      p%max_width = cfg%max_width(s)
-      p%box = cfg%box
-      p%periodic = cfg%periodic
-      p%void = cfg%placement == "void"
+      p%min_width = cfg%sieves%min_width(s)
+      p%max_width = cfg%sieves%max_width(s)
+      p%box = cfg%box%length
+      p%periodic = cfg%box%periodic
+      p%void = cfg%parking%placement == placement%void
    end function attempt_params
 
    !> What the RSA strategy needs of the configuration and of the caller.
@@ -212,17 +212,17 @@ contains
       type(run_config_type), intent(in) :: cfg
       integer, intent(in), optional :: progress_unit, max_batch
       type(rsa_params_type) :: p
-      p%max_failures = cfg%max_failures
+      p%max_failures = cfg%parking%max_failures
       ! kinds are built when first needed: with one shape and one size per particle, each
       ! particle's kind is its stream's first draw, known before its batch runs (M_sand's two
       ! coarse sieves draw about 8 of their 24 shapes); otherwise a sieve's kinds are built when
       ! it starts
-      p%lazy = cfg%max_shapes == 1 .and. cfg%max_sizes == 1
-      p%void = cfg%placement == "void"
+      p%lazy = cfg%parking%max_shapes == 1 .and. cfg%parking%max_sizes == 1
+      p%void = cfg%parking%placement == placement%void
       p%nthreads = omp_get_max_threads()
       if (present(max_batch)) p%batch_limit = max(1, max_batch)
-      p%vbox = product(cfg%box)
-      p%nlayer = cfg%nlayer
+      p%vbox = product(cfg%box%length)
+      p%nlayer = cfg%shells%nlayer
       if (present(progress_unit)) p%progress_unit = progress_unit
    end function rsa_params
 
@@ -235,39 +235,36 @@ contains
       integer :: k, np, s
       real(wp) :: vbox
       np = pk%np
-      vbox = product(cfg%box)
+      vbox = product(cfg%box%length)
       allocate (model%achieved_fraction(size(result)), model%count(size(result)), model%shell_fraction(size(result)))
       do s = 1, size(result)
          model%achieved_fraction(s) = result(s)%vol / vbox
          model%count(s) = result(s)%count
          model%shell_fraction(s) = result(s)%shell_fraction
       end do
-      model%box = cfg%box
-      model%periodic = cfg%periodic
+      model%box = cfg%box%length
+      model%periodic = cfg%box%periodic
       model%np = np
       model%center = pk%center(:, :np)
       model%rotation = pk%rot(:, :, :np)
       model%scale = pk%scale(:np)
       model%sieve = pk%sieve(:np)
-      allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%nlayer, np))
+      allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%shells%nlayer, np))
       do k = 1, np
          associate (kd => pk%kinds(pk%kind_of(k)))
             model%shape(k) = kd%shape
             model%nmax(k) = kd%order
-            if (cfg%nlayer > 0) then
-               if (cfg%thickness_unit == "mm") then
-                  model%shell_thickness(:, k) = cfg%thickness
-               else
-                  model%shell_thickness(:, k) = cfg%thickness * kd%length * pk%scale(k)
-               end if
+            if (cfg%shells%nlayer > 0) then
+               model%shell_thickness(:, k) = thickness_to_mm(cfg%shells%thickness, cfg%shells%unit, kd%length, &
+                                                             pk%scale(k))
             end if
          end associate
       end do
-      model%min_width = cfg%min_width
-      model%max_width = cfg%max_width
-      model%target_fraction = cfg%target_fraction
+      model%min_width = cfg%sieves%min_width
+      model%max_width = cfg%sieves%max_width
+      model%target_fraction = cfg%sieves%target_fraction
       model%namelist = cfg%text
-      model%resolved = resolved_namelist(cfg)
-      model%seed = cfg%seed
+      model%resolved = write_config(cfg)
+      model%seed = cfg%run%seed
    end subroutine fill_model
 end module anm_parking_engine

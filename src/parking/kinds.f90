@@ -16,7 +16,8 @@ module anm_parking_kinds
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_contact_body, only: contact_body_type, new_contact_body
    use anm_shells_build, only: shell_report_type, build_layers
-   use anm_parking_config, only: shell_mode
+   use anm_config_shells, only: shell_mode
+   use anm_shells_thickness, only: thickness_unit, thickness_to_shape_units
    implicit none
    private
 
@@ -62,7 +63,7 @@ module anm_parking_kinds
       !> of the particle length).
       integer :: nlayer = 0
       real(wp), allocatable :: thickness(:)
-      logical :: thickness_mm = .false.
+      integer :: unit = thickness_unit%fraction_of_length
       !> Shell mode (`shell_mode`).
       integer :: mode = shell_mode%exclude
       !> Extended-grid size of the contact bodies.
@@ -117,7 +118,7 @@ contains
       end do
       nsieve = size(first_shape)
       ks%nlev = 1
-      if (params%nlayer > 0 .and. params%thickness_mm) ks%nlev = width_levels
+      if (params%nlayer > 0 .and. params%unit == thickness_unit%mm) ks%nlev = width_levels
       allocate (ks%first(nsieve), ks%count(nsieve))
       n = 0
       do s = 1, nsieve
@@ -258,13 +259,12 @@ contains
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
       if (p%nlayer == 0) return
-      if (p%thickness_mm) then
+      sc = 1.0_wp
+      if (p%unit == thickness_unit%mm) then
          w = level_width(p, kd)
          sc = w / kd%width
-         t = p%thickness / sc
-      else
-         t = p%thickness * kd%length
       end if
+      t = thickness_to_shape_units(p%thickness, p%unit, kd%length, sc)
       call build_layers(s, t, kd%layers, reports, error, label=name)
       if (allocated(error)) then
          error%message = p%file//": &shells: "//error%message

@@ -19,7 +19,7 @@
 module anm_parking_packing
    use anm_core_kinds, only: wp
    use anm_contact_overlap, only: contact_params_type, bodies_overlap, body_crosses_walls
-   use anm_parking_config, only: shell_mode
+   use anm_config_shells, only: shell_mode
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_parking_kinds, only: particle_kind_type
    implicit none

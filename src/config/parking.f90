@@ -1,0 +1,197 @@
+!> The `&parking` group: the attempts of the parking and the contact test (docs/parking.md).
+!>
+!>     &parking max_locations = 2000, contact_method = 'eob', placement = 'uniform' /
+!>
+!> Validates: max_locations, max_orientations, max_sizes, max_shapes, max_failures >= 1;
+!> n_ext, n_box >= 2; contact_method 'eob' or 'newton_raphson' (resolved to `contact_method%...`);
+!> placement 'uniform' or 'void' (resolved to `placement%...`).
+!>
+!> Usage:
+!>     call load_parking_config(parking, nml, error)
+!>     if (parking%placement == placement%void) ...
+module anm_config_parking
+   use anm_core_error, only: error_type
+   use anm_core_strings, only: to_string, to_lower
+   use anm_contact_overlap, only: contact_method
+   use anm_config_namelist, only: namelist_file_type, find_group, config_error, group_read_error, max_line
+   use anm_config_format, only: logical_text
+   implicit none
+   private
+
+   public :: parking_config_type, load_parking_config, dump_parking_config, placement, contact_method, &
+      & placement_name, contact_method_name
+
+   !> Placement of candidate centres.
+   type :: placement_enum
+      !> Uniform in the box (the thesis).
+      integer :: uniform = 1
+      !> Drawn from the free space of a void grid.
+      integer :: void = 2
+   end type placement_enum
+
+   !> The placements, used as `placement%void`.
+   type(placement_enum), parameter :: placement = placement_enum()
+
+   !> The parking.
+   type :: parking_config_type
+      !> The thesis' four randomness sources.
+      integer :: max_locations = 2000, max_orientations = 1, max_sizes = 1, max_shapes = 1
+      !> Particles of a sieve that may exhaust all their attempts before the sieve ends.
+      integer :: max_failures = 1
+      !> Contact method, one of `contact_method`.
+      integer :: contact_method = contact_method%eob
+      !> N_ext and N_box of the contact test.
+      integer :: n_ext = 40, n_box = 128
+      !> Certified contact.
+      logical :: certified = .true.
+      !> Placement of candidate centres, one of `placement`.
+      integer :: placement = placement%uniform
+   end type parking_config_type
+
+contains
+
+   !> Read and validate `&parking` (optional: defaults).
+   subroutine load_parking_config(self, nml, error)
+      !> The parking.
+      type(parking_config_type), intent(out) :: self
+      !> The scanned namelist file.
+      type(namelist_file_type), intent(in) :: nml
+      !> Error naming file, line, group and variable.
+      type(error_type), allocatable, intent(out) :: error
+      integer :: max_locations, max_orientations, max_sizes, max_shapes, max_failures, n_ext, n_box
+      character(len=32) :: contact_method
+      character(len=16) :: placement
+      logical :: certified
+      namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
+         n_ext, n_box, certified, placement
+      integer :: ig, stat
+      character(len=512) :: msg
+      character(len=max_line), allocatable :: lines(:)
+
+      max_locations = self%max_locations
+      max_orientations = self%max_orientations
+      max_sizes = self%max_sizes
+      max_shapes = self%max_shapes
+      max_failures = self%max_failures
+      contact_method = contact_method_name(self%contact_method)
+      n_ext = self%n_ext
+      n_box = self%n_box
+      certified = self%certified
+      placement = placement_name(self%placement)
+      ig = find_group(nml, "parking")
+      if (ig > 0) then
+         lines = nml%groups(ig)%lines
+         read (lines, nml=parking, iostat=stat, iomsg=msg)
+         if (stat /= 0) then
+            call group_read_error(error, nml, ig, msg, reader)
+            return
+         end if
+      end if
+      call at_least("max_locations", max_locations, 1)
+      call at_least("max_orientations", max_orientations, 1)
+      call at_least("max_sizes", max_sizes, 1)
+      call at_least("max_shapes", max_shapes, 1)
+      call at_least("max_failures", max_failures, 1)
+      call at_least("n_ext", n_ext, 2)
+      call at_least("n_box", n_box, 2)
+      if (allocated(error)) return
+      self%max_locations = max_locations
+      self%max_orientations = max_orientations
+      self%max_sizes = max_sizes
+      self%max_shapes = max_shapes
+      self%max_failures = max_failures
+      self%n_ext = n_ext
+      self%n_box = n_box
+      self%certified = certified
+      select case (to_lower(trim(contact_method)))
+      case ("eob")
+         self%contact_method = contact_method_enum_eob()
+      case ("newton_raphson")
+         self%contact_method = contact_method_enum_nr()
+      case default
+         call config_error(error, nml, ig, "parking", "contact_method", "= '"//trim(contact_method) &
+                           //"' must be 'eob' or 'newton_raphson'")
+         return
+      end select
+      select case (to_lower(trim(placement)))
+      case ("uniform")
+         self%placement = placement_enum_uniform()
+      case ("void")
+         self%placement = placement_enum_void()
+      case default
+         call config_error(error, nml, ig, "parking", "placement", "= '"//trim(placement) &
+                           //"' must be 'uniform' or 'void'")
+         return
+      end select
+
+   contains
+
+      subroutine at_least(var, x, lo)
+         character(len=*), intent(in) :: var
+         integer, intent(in) :: x, lo
+         if (allocated(error)) return
+         if (x < lo) call config_error(error, nml, ig, "parking", var, "= "//to_string(x)//" must be >= "//to_string(lo))
+      end subroutine at_least
+
+      subroutine reader(lines, stat, msg)
+         character(len=*), intent(in) :: lines(:)
+         integer, intent(out) :: stat
+         character(len=*), intent(inout) :: msg
+         read (lines, nml=parking, iostat=stat, iomsg=msg)
+      end subroutine reader
+   end subroutine load_parking_config
+
+   ! the local namelist variables shadow the enumerators inside load_parking_config
+   pure integer function contact_method_enum_eob() result(k)
+      k = contact_method%eob
+   end function contact_method_enum_eob
+
+   pure integer function contact_method_enum_nr() result(k)
+      k = contact_method%newton_raphson
+   end function contact_method_enum_nr
+
+   pure integer function placement_enum_uniform() result(k)
+      k = placement%uniform
+   end function placement_enum_uniform
+
+   pure integer function placement_enum_void() result(k)
+      k = placement%void
+   end function placement_enum_void
+
+   !> Namelist spelling of a contact method.
+   pure function contact_method_name(method) result(s)
+      !> One of `contact_method`.
+      integer, intent(in) :: method
+      character(len=:), allocatable :: s
+      if (method == contact_method%newton_raphson) then
+         s = "newton_raphson"
+      else
+         s = "eob"
+      end if
+   end function contact_method_name
+
+   !> Namelist spelling of a placement.
+   pure function placement_name(p) result(s)
+      !> One of `placement`.
+      integer, intent(in) :: p
+      character(len=:), allocatable :: s
+      if (p == placement%void) then
+         s = "void"
+      else
+         s = "uniform"
+      end if
+   end function placement_name
+
+   !> The resolved `&parking` group as namelist text.
+   pure function dump_parking_config(self) result(text)
+      !> The parking.
+      type(parking_config_type), intent(in) :: self
+      character(len=:), allocatable :: text
+      text = "&parking max_locations = "//to_string(self%max_locations)//", max_orientations = " &
+             //to_string(self%max_orientations)//", max_sizes = "//to_string(self%max_sizes)//", max_shapes = " &
+             //to_string(self%max_shapes)//", max_failures = "//to_string(self%max_failures) &
+             //", contact_method = '"//contact_method_name(self%contact_method)//"', n_ext = " &
+             //to_string(self%n_ext)//", n_box = "//to_string(self%n_box)//", certified = " &
+             //logical_text(self%certified)//", placement = '"//placement_name(self%placement)//"' /"//new_line("a")
+   end function dump_parking_config
+end module anm_config_parking
