@@ -17,6 +17,9 @@ program anm
    use anm_shapes_library, only: load_shape_file
    use anm_contact_studies, only: study_next, study_nbox
    use anm_cli_run, only: run_job, anm_version
+   use anm_audit_verify, only: verify_memory
+   use anm_core_output, only: ignore_file_size_signal
+   use anm_core_resources, only: check_memory, shape_memory
    use omp_lib, only: omp_get_max_threads
    implicit none
 
@@ -25,6 +28,7 @@ program anm
    integer :: threads
 
    threads = omp_get_max_threads()
+   call ignore_file_size_signal()   ! a file-size limit gives EFBIG, reported as an error
 
    if (command_argument_count() < 1) then
       call usage(error_unit)
@@ -258,6 +262,9 @@ contains
          call fatal_error(error, "anm synth: missing output DIR argument", error_code%value)
          return
       end if
+      call check_memory(shape_memory(real(max(0, count), wp), par%nmax), "anm synth --count "//to_string(count), &
+                        "--count", error)
+      if (allocated(error)) return
       call synthetic_shapes(par, int(seed, i8), count, set, error)
       if (allocated(error)) return
       call make_directory(dir, error)
@@ -306,6 +313,9 @@ contains
          return
       end if
       call read_model(path, model, error)
+      if (allocated(error)) return
+      call check_memory(verify_memory(model, resolution), "anm verify --resolution "//to_string(resolution), &
+                        "--resolution", error)
       if (allocated(error)) return
       if (have_tol) then
          call verify_model(model, resolution, rep, tol)
