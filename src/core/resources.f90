@@ -105,9 +105,9 @@ contains
       else if (bytes >= 1.0e9_wp) then
          write (buf, '(f0.1,a)') bytes / 1.0e9_wp, " GB"
       else if (bytes >= 1.0e6_wp) then
-         write (buf, '(f0.0,a)') bytes / 1.0e6_wp, " MB"
+         write (buf, '(i0,a)') nint(bytes / 1.0e6_wp), " MB"
       else
-         write (buf, '(f0.0,a)') bytes / 1.0e3_wp, " kB"
+         write (buf, '(i0,a)') nint(max(0.0_wp, bytes) / 1.0e3_wp), " kB"
       end if
       text = trim(adjustl(buf))
       if (text(1:1) == ".") text = "0"//text

@@ -32,6 +32,8 @@ module anm_io_hdf5
       integer(hid_t) :: id = -1
       !> Dataset and group creation property lists (timestamps off).
       integer(hid_t) :: dcpl = -1, gcpl = -1
+      !> Built in memory (HDF5's core driver) and written to `name` by h5_close.
+      logical :: in_memory = .false.
    end type h5_file_type
 
    !> A string read from a file.
@@ -76,23 +78,32 @@ contains
       call fatal_error(error, file%name//"::"//obj//": "//what, error_code%io)
    end subroutine fail
 
-   !> Create (truncate) a file for writing.
+   !> Create a file for writing. It is built in memory (HDF5's core driver, no backing store) and
+   !> written to disk by h5_close with checked writes: a full disk or a file-size limit is then an
+   !> error of h5_close, and HDF5 never holds a half-written file (which it would try to flush
+   !> again, and crash, at program exit).
    subroutine h5_create(file, name, error)
+      use hdf5, only: h5pset_fapl_core_f, H5P_FILE_ACCESS_F, H5P_DEFAULT_F
       !> Handle.
       type(h5_file_type), intent(out) :: file
       !> File name.
       character(len=*), intent(in) :: name
       !> Error.
       type(error_type), allocatable, intent(out) :: error
-      integer :: st
+      integer :: st, s2
+      integer(hid_t) :: fapl
       file%name = name
       call h5open_f(st)
       call h5eset_auto_f(0, st)
-      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st)
+      call h5pcreate_f(H5P_FILE_ACCESS_F, fapl, st)
+      call h5pset_fapl_core_f(fapl, int(4 * 1024 * 1024, size_t), .false., st)
+      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st, H5P_DEFAULT_F, fapl)
+      call h5pclose_f(fapl, s2)
       if (st /= 0) then
          call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
          return
       end if
+      file%in_memory = .true.
       call h5pcreate_f(H5P_DATASET_CREATE_F, file%dcpl, st)
       call h5pset_obj_track_times_f(file%dcpl, .false., st)
       call h5pcreate_f(H5P_GROUP_CREATE_F, file%gcpl, st)
@@ -121,15 +132,52 @@ contains
       if (st /= 0) call fatal_error(error, name//": not a readable HDF5 file", error_code%io)
    end subroutine h5_open_read
 
-   !> Close a file.
+   !> Close a file; a file created by h5_create is written to disk here (every write and the close
+   !> checked; errors name the file and the reason).
    subroutine h5_close(file, error)
+      use hdf5, only: h5fflush_f, h5fget_file_image_f, H5F_SCOPE_GLOBAL_F
       !> Handle.
       type(h5_file_type), intent(inout) :: file
       !> Error.
       type(error_type), allocatable, intent(out) :: error
-      integer :: st
+      integer :: st, unit, s2
+      integer(size_t) :: n
+      character(kind=c_char), allocatable, target :: image(:)
+      type(c_ptr) :: p
+      character(len=512) :: msg
       if (file%dcpl >= 0) call h5pclose_f(file%dcpl, st)
       if (file%gcpl >= 0) call h5pclose_f(file%gcpl, st)
+      file%dcpl = -1
+      file%gcpl = -1
+      if (file%in_memory) then
+         call h5fflush_f(file%id, H5F_SCOPE_GLOBAL_F, st)
+         p = c_null_ptr
+         if (st == 0) call h5fget_file_image_f(file%id, p, 0_size_t, st, n)
+         if (st == 0) then
+            allocate (image(max(1_size_t, n)))
+            p = c_loc(image)
+            call h5fget_file_image_f(file%id, p, n, st)
+         end if
+         call h5fclose_f(file%id, s2)
+         file%id = -1
+         file%in_memory = .false.
+         if (st /= 0) then
+            call fatal_error(error, file%name//": cannot build the HDF5 file image", error_code%io)
+            return
+         end if
+         open (newunit=unit, file=file%name, access="stream", form="unformatted", status="replace", &
+               action="write", iostat=st, iomsg=msg)
+         if (st == 0) write (unit, iostat=st, iomsg=msg) image(:n)
+         if (st == 0) flush (unit, iostat=st, iomsg=msg)
+         if (st == 0) then
+            close (unit, iostat=st, iomsg=msg)
+         else
+            close (unit, iostat=s2)
+         end if
+         if (st /= 0) call fatal_error(error, file%name//": writing the HDF5 file failed ("//trim(msg)//")", &
+                                       error_code%io)
+         return
+      end if
       call h5fclose_f(file%id, st)
       if (st /= 0) call fatal_error(error, file%name//": error closing HDF5 file", error_code%io)
       file%id = -1
@@ -538,7 +586,7 @@ contains
    !> fixed length (NUL- or space-padded) or a variable length; errors when it holds no strings.
    subroutine read_text(file, path, id, is_attr, texts, error)
       use hdf5, only: h5aget_type_f, h5aget_space_f, h5sget_simple_extent_npoints_f, h5tget_class_f, &
-         & h5tis_variable_str_f, h5dvlen_reclaim_f, H5T_STRING_F, H5T_STRING, H5P_DEFAULT_F
+         & h5tis_variable_str_f, h5dvlen_reclaim_f, H5T_STRING_F, H5P_DEFAULT_F
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       integer(hid_t), intent(in) :: id
@@ -576,10 +624,10 @@ contains
          ptrs = c_null_ptr
          if (is_attr) then
             bufp = c_loc(ptrs)
-            call h5aread_f(id, H5T_STRING, bufp, st)
+            call h5aread_f(id, dtype, bufp, st)
          else
             bufp = c_loc(ptrs)
-            call h5dread_f(id, H5T_STRING, bufp, st)
+            call h5dread_f(id, dtype, bufp, st)
          end if
          if (st /= 0) then
             call fail(error, file, path, "read failed (variable-length string)")
@@ -594,7 +642,7 @@ contains
             end if
          end do
          bufp = c_loc(ptrs)
-         call h5dvlen_reclaim_f(H5T_STRING, space, H5P_DEFAULT_F, bufp, s2)
+         call h5dvlen_reclaim_f(dtype, space, H5P_DEFAULT_F, bufp, s2)
       else
          call h5tget_size_f(dtype, sz, st)
          allocate (bytes(max(1, int(sz) * n)))

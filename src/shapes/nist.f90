@@ -15,6 +15,7 @@ module anm_shapes_nist
    use anm_core_strings, only: to_string
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion, sh_to_complex
    use anm_core_output, only: output_set_type
+   use anm_core_text, only: printable
    implicit none
    private
 
@@ -68,16 +69,16 @@ contains
          end if
          if (count_fields(line) /= 4) then
             call fail("expected 4 fields 'n m Re(a_nm) Im(a_nm)', found " &
-                      //to_string(count_fields(line))//": '"//trim(line)//"'")
+                      //to_string(count_fields(line))//": '"//printable(trim(line))//"'")
             return
          end if
          read (line, *, iostat=stat) n, m, re, im
          if (stat /= 0) then
-            call fail("non-numeric field in '"//trim(line)//"'")
+            call fail("non-numeric field in '"//printable(trim(line))//"'")
             return
          end if
          if (re /= re .or. im /= im .or. abs(re) > huge(re) .or. abs(im) > huge(im)) then
-            call fail("coefficient is not a finite number: '"//trim(line)//"'")
+            call fail("coefficient is not a finite number: '"//printable(trim(line))//"'")
             return
          end if
          if (n /= nexp .or. m /= mexp) then
