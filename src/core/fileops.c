@@ -6,6 +6,7 @@
 #include <unistd.h>
 #include <signal.h>
 #include <errno.h>
+#include <sys/stat.h>
 
 /* Lock directory `dir` exclusively (waits for other holders). Returns a descriptor >= 0 to pass to
  * anm_unlock_dir, or -errno. */
@@ -41,4 +42,12 @@ int anm_process_alive(int pid)
     if (pid <= 0) return 0;
     if (kill((pid_t)pid, 0) == 0) return 1;
     return errno == EPERM ? 1 : 0;
+}
+
+/* Size in bytes of file `path` as the file system has it, -1 if it cannot be read. */
+long long anm_file_size(const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) return -1;
+    return (long long)st.st_size;
 }

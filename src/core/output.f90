@@ -12,14 +12,15 @@
 !>     ...
 !>     call set%commit(error)                        ! or: call set%discard()
 module anm_core_output
-   use, intrinsic :: iso_c_binding, only: c_char, c_int, c_null_char, c_funptr, c_null_funptr
+   use, intrinsic :: iso_c_binding, only: c_char, c_int, c_long_long, c_null_char, c_funptr, c_null_funptr
+   use anm_core_kinds, only: i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_filesystem, only: list_directory, string_type, join_path, base_name
    implicit none
    private
 
    public :: output_set_type, check_writable, ignore_file_size_signal, remove_file, temp_name, &
-      & remove_stale_temps, directory_of, temp_tag
+      & remove_stale_temps, directory_of, temp_tag, check_complete, file_size
 
    !> Marker in temporary file names: FINAL//temp_tag//PID.
    character(len=*), parameter :: temp_tag = ".anm-tmp-"
@@ -72,6 +73,11 @@ module anm_core_output
          character(kind=c_char), intent(in) :: path(*)
          integer(c_int) :: stat
       end function c_fsync_path
+      function c_file_size(path) bind(c, name="anm_file_size") result(size)
+         import :: c_char, c_long_long
+         character(kind=c_char), intent(in) :: path(*)
+         integer(c_long_long) :: size
+      end function c_file_size
       function c_process_alive(pid) bind(c, name="anm_process_alive") result(alive)
          import :: c_int
          integer(c_int), value, intent(in) :: pid
@@ -90,6 +96,46 @@ contains
       ! SIG_IGN is the handler address 1
       old = c_signal(sigxfsz, transfer(1_8, c_null_funptr))
    end subroutine ignore_file_size_signal
+
+   !> Size of a file in bytes as the file system has it (-1 when it cannot be read).
+   function file_size(path) result(size)
+      !> File name.
+      character(len=*), intent(in) :: path
+      integer(i8) :: size
+      size = int(c_file_size(trim(path)//c_null_char), i8)
+   end function file_size
+
+   !> Check that everything written to `unit` (opened on file `path` with access="stream") reached
+   !> the file: flushes it and compares the position with the size on disk. gfortran's runtime
+   !> does not report a short write (disk full, file-size limit) through iostat, so every writer
+   !> calls this before closing. Errors name `shown`.
+   subroutine check_complete(unit, path, shown, error)
+      !> Open unit (stream access).
+      integer, intent(in) :: unit
+      !> File name of the unit.
+      character(len=*), intent(in) :: path
+      !> Name for messages.
+      character(len=*), intent(in) :: shown
+      !> Error: the file is shorter than what was written.
+      type(error_type), allocatable, intent(out) :: error
+      integer(i8) :: pos, size
+      integer :: stat
+      character(len=512) :: msg
+      character(len=24) :: a, b
+      flush (unit, iostat=stat, iomsg=msg)
+      if (stat /= 0) then
+         call fatal_error(error, shown//": write failed ("//trim(msg)//")", error_code%io)
+         return
+      end if
+      inquire (unit=unit, pos=pos)
+      size = file_size(path)
+      if (size /= pos - 1) then
+         write (a, '(i0)') max(0_i8, size)
+         write (b, '(i0)') pos - 1
+         call fatal_error(error, shown//": write failed: "//trim(a)//" of "//trim(b)// &
+                          " bytes reached the disk (disk full or file-size limit)", error_code%io)
+      end if
+   end subroutine check_complete
 
    !> Folder part of a path ("." when there is none).
    pure function directory_of(path) result(dir)

@@ -16,7 +16,8 @@ module anm_io_hdf5
       & H5T_NATIVE_DOUBLE, H5T_NATIVE_INTEGER, H5T_FORTRAN_S1, h5eset_auto_f
    use, intrinsic :: iso_c_binding, only: c_ptr, c_char, c_null_char, c_null_ptr, c_loc, c_f_pointer, c_associated, &
       & c_size_t
-   use anm_core_kinds, only: wp
+   use anm_core_kinds, only: wp, i8
+   use anm_core_output, only: file_size
    use anm_core_error, only: error_type, fatal_error, error_code
    implicit none
    private
@@ -174,8 +175,14 @@ contains
          else
             close (unit, iostat=s2)
          end if
-         if (st /= 0) call fatal_error(error, file%name//": writing the HDF5 file failed ("//trim(msg)//")", &
-                                       error_code%io)
+         if (st /= 0) then
+            call fatal_error(error, file%name//": writing the HDF5 file failed ("//trim(msg)//")", error_code%io)
+         else if (file_size(file%name) /= int(n, i8)) then
+            ! gfortran does not report a short write through iostat: compare with the size on disk
+            call fatal_error(error, file%name//": writing the HDF5 file failed: "//int_text(int(max(0_i8, &
+                             file_size(file%name)) / 1024))//" of "//int_text(int(n / 1024))// &
+                             " kB reached the disk (disk full or file-size limit)", error_code%io)
+         end if
          return
       end if
       call h5fclose_f(file%id, st)

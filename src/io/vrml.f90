@@ -10,7 +10,7 @@ module anm_io_vrml
    use anm_core_kinds, only: wp, pi
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_sh_expansion, only: sh_expansion_type
-   use anm_core_output, only: output_set_type
+   use anm_core_output, only: output_set_type, check_complete
    implicit none
    private
 
@@ -119,7 +119,8 @@ contains
 
       name = path
       if (present(shown)) name = shown
-      open (newunit=unit, file=path, status="replace", action="write", iostat=stat, iomsg=msg)
+      open (newunit=unit, file=path, access="stream", form="formatted", status="replace", action="write", &
+            iostat=stat, iomsg=msg)
       if (stat /= 0) then
          call fatal_error(error, name//": cannot write VRML file ("//trim(msg)//")", error_code%io)
          return
@@ -147,11 +148,15 @@ contains
             defined(k) = .true.
          end if
       end do
-      if (stat == 0) flush (unit, iostat=stat, iomsg=msg)
       if (stat /= 0) then
          close (unit, iostat=i)
          call fatal_error(error, name//": writing the VRML file failed ("//trim(io_reason(stat, msg))//")", &
                           error_code%io)
+         return
+      end if
+      call check_complete(unit, path, name, error)
+      if (allocated(error)) then
+         close (unit, iostat=i)
          return
       end if
       close (unit, iostat=stat, iomsg=msg)

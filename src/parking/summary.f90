@@ -9,7 +9,7 @@ module anm_parking_summary
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_io_model, only: model_type
-   use anm_core_output, only: output_set_type
+   use anm_core_output, only: output_set_type, check_complete
    implicit none
    private
 
@@ -83,7 +83,8 @@ contains
       character(len=:), allocatable :: name
       name = path
       if (present(shown)) name = shown
-      open (newunit=unit, file=path, status="replace", action="write", iostat=stat, iomsg=msg)
+      open (newunit=unit, file=path, access="stream", form="formatted", status="replace", action="write", &
+            iostat=stat, iomsg=msg)
       if (stat /= 0) then
          call fatal_error(error, name//": cannot write summary ("//trim(msg)//")", error_code%io)
          return
@@ -104,10 +105,14 @@ contains
       if (stat == 0) write (unit, '(a,2(",",a),3(",",g0.8),",",i0,",",g0.8)', iostat=stat, iomsg=msg) "total", "", "", &
          sum(model%target_fraction), sum(model%achieved_fraction), &
          max(0.0_wp, sum(model%target_fraction) - sum(model%achieved_fraction)), sum(model%count), sf
-      if (stat == 0) flush (unit, iostat=stat, iomsg=msg)
       if (stat /= 0) then
          close (unit, iostat=s2)
          call fatal_error(error, name//": writing the summary failed ("//trim(msg)//")", error_code%io)
+         return
+      end if
+      call check_complete(unit, path, name, error)
+      if (allocated(error)) then
+         close (unit, iostat=s2)
          return
       end if
       close (unit, iostat=stat, iomsg=msg)

@@ -14,7 +14,7 @@ module anm_shapes_nist
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion, sh_to_complex
-   use anm_core_output, only: output_set_type
+   use anm_core_output, only: output_set_type, check_complete
    use anm_core_text, only: printable
    implicit none
    private
@@ -208,7 +208,8 @@ contains
       fmt = '(2i4,2f20.10)'
       if (shape%nmax >= 100) fmt = '(2i5,2f20.10)'
       call set%add(path, tmp)
-      open (newunit=unit, file=tmp, status="replace", action="write", iostat=stat, iomsg=msg)
+      open (newunit=unit, file=tmp, access="stream", form="formatted", status="replace", action="write", &
+            iostat=stat, iomsg=msg)
       if (stat /= 0) then
          call fatal_error(error, trim(path)//": cannot write shape file ("//trim(msg)//")", error_code%io)
          call set%discard()
@@ -221,8 +222,13 @@ contains
          end do
          if (stat /= 0) exit
       end do
-      if (stat == 0) flush (unit, iostat=stat, iomsg=msg)
       if (stat == 0) then
+         call check_complete(unit, tmp, trim(path), error)
+         if (allocated(error)) then
+            close (unit, iostat=s2)
+            call set%discard()
+            return
+         end if
          close (unit, iostat=stat, iomsg=msg)
       else
          close (unit, iostat=s2)
