@@ -174,7 +174,9 @@ contains
       integer :: s, nsynth
       character(len=:), allocatable :: variable
 
-      particles = particle_count_estimate(cfg%box%length, cfg%sieves%min_width(:cfg%sieves%nsieve), cfg%sieves%target_fraction(:cfg%sieves%nsieve))
+      associate (ns => cfg%sieves%nsieve)
+         particles = particle_count_estimate(cfg%box%length, cfg%sieves%min_width(:ns), cfg%sieves%target_fraction(:ns))
+      end associate
       kinds = 0.0_wp
       nsynth = 0
       do s = 1, cfg%sieves%nsieve
