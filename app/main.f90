@@ -8,6 +8,7 @@ program anm
    use anm_cli_arguments, only: command_arguments
    use anm_cli_commands, only: write_usage, shape_command, synth_command, verify_command, study_command
    use anm_cli_run, only: run_job, anm_version
+   use anm_core_output, only: ignore_file_size_signal
    use omp_lib, only: omp_get_max_threads
    implicit none
 
@@ -15,6 +16,7 @@ program anm
    type(error_type), allocatable :: error
    integer :: status
 
+   call ignore_file_size_signal()   ! a file-size limit gives EFBIG, reported as an error
    args = command_arguments()
    if (size(args) < 1) then
       call write_usage(error_unit)

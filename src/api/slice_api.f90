@@ -17,6 +17,7 @@ module anm_api_slice
    use, intrinsic :: iso_c_binding, only: c_double, c_int
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type
+   use anm_core_resources, only: check_memory
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real, sh_truncate, sh_from_rows
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_slicing_plane, only: slice_plane_type, new_slice_plane
@@ -324,6 +325,14 @@ contains
             return
          end if
       end do
+      ! the label arrays (three int32 per pixel) and the kernel's work per pixel: refuse above the memory
+      ! available rather than fail in allocate
+      call check_memory(real(nu, wp) * real(nv, wp) * real(nplane, wp) * 24.0_wp, "slice of " &
+                        //pixels_text(nu, nv, nplane)//" pixels", "the pixel count (a larger pixel size)", error)
+      if (allocated(error)) then
+         call set_error(status, message, error%stat, error%message)
+         return
+      end if
       allocate (ip(nu, nv, nplane), il(nu, nv, nplane), io(nu, nv, nplane))
       call slice_labels(planes, forms, form, shell_form, real(center, wp), real(rotation, wp), real(scale, wp), &
                         real(box, wp), periodic /= 0, ip, il, io, st, error)
@@ -505,4 +514,12 @@ contains
       status = stat
       message = text
    end subroutine set_error
+   !> "nu x nv x nplane" as text.
+   pure function pixels_text(nu, nv, nplane) result(text)
+      integer(c_int), intent(in) :: nu, nv, nplane
+      character(len=:), allocatable :: text
+      character(len=64) :: buf
+      write (buf, '(i0,a,i0,a,i0)') nu, " x ", nv, " x ", nplane
+      text = trim(buf)
+   end function pixels_text
 end module anm_api_slice

@@ -26,7 +26,7 @@ module anm_audit_verify
    implicit none
    private
 
-   public :: verify_report_type, verify_model
+   public :: verify_report_type, verify_model, verify_memory
 
    !> Result of an audit.
    type :: verify_report_type
@@ -320,6 +320,29 @@ contains
          end do
       end associate
    end function wall_depth
+
+   !> Memory (bytes) verify_model needs at `resolution`: per distinct (shape, order) pair the
+   !> 2 resolution**2 sampled surface points and their block bounds, plus per particle its key,
+   !> bounding radius, cell-list entry and wrapped centre.
+   function verify_memory(model, resolution) result(bytes)
+      !> Model (validated).
+      type(model_type), intent(in) :: model
+      !> Polar samples (as verify_model).
+      integer, intent(in) :: resolution
+      real(wp) :: bytes
+      logical, allocatable :: seen(:, :)
+      integer :: p, nkey, maxorder
+      maxorder = 0
+      if (model%np > 0) maxorder = maxval(model%nmax(:model%np))
+      allocate (seen(size(model%shapes), 0:maxorder))
+      seen = .false.
+      do p = 1, model%np
+         seen(model%shape(p), model%nmax(p)) = .true.
+      end do
+      nkey = count(seen)
+      bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (24.0_wp + 40.0_wp / block**2) &
+              + real(model%np, wp) * 200.0_wp
+   end function verify_memory
 
    !> True when no point of the ball (c, r) (B's body frame, shape units) can lie inside B: the
    !> ball is farther from B's centre than B's radius bound over every block its cap touches.

@@ -17,7 +17,8 @@ module anm_cli_commands
    use anm_shapes_nist, only: write_nist_shape
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_io_model, only: model_type, read_model
-   use anm_audit_verify, only: verify_report_type, verify_model
+   use anm_audit_verify, only: verify_report_type, verify_model, verify_memory
+   use anm_core_resources, only: check_memory, shape_memory
    use anm_sh_expansion, only: sh_expansion_type
    use anm_contact_studies, only: study_next, study_nbox
    implicit none
@@ -180,6 +181,9 @@ contains
          call fatal_error(error, "anm synth: missing output DIR argument", error_code%value)
          return
       end if
+      call check_memory(shape_memory(real(max(0, count), wp), par%nmax), "anm synth --count "//to_string(count), &
+                        "--count", error)
+      if (allocated(error)) return
       call synthetic_shapes(par, int(seed, i8), count, set, error)
       if (allocated(error)) return
       call make_directory(dir, error)
@@ -237,6 +241,9 @@ contains
          return
       end if
       call read_model(path, model, error)
+      if (allocated(error)) return
+      call check_memory(verify_memory(model, resolution), "anm verify --resolution "//to_string(resolution), &
+                        "--resolution", error)
       if (allocated(error)) return
       if (have_tol) then
          call verify_model(model, resolution, rep, tol)

@@ -4,21 +4,24 @@
 !> Usage:
 !>     call run_job("inputs/default.nml", output_unit, error_unit, error)
 module anm_cli_run
-   use anm_core_kinds, only: wp
+   use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
-   use anm_core_filesystem, only: make_directory, join_path
+   use anm_core_filesystem, only: make_directory, join_path, is_directory, list_directory, string_type
+   use anm_core_output, only: output_set_type, check_writable, remove_stale_temps
+   use anm_core_resources, only: check_memory, particle_count_estimate, run_memory_estimate, shape_memory
+   use anm_shapes_library, only: is_shape_file_name
    use anm_config_job, only: run_config_type, read_config
    use anm_config_shells, only: thickness_unit_keyword, shell_mode_name
    use anm_parking_engine, only: run_parking, particle_kind_type
-   use anm_parking_summary, only: write_summary, write_summary_csv
-   use anm_io_model, only: model_type, write_model
-   use anm_io_vrml, only: vrml_mesh_type, write_vrml
+   use anm_parking_summary, only: write_summary, write_summary_csv_file
+   use anm_io_model, only: model_type, write_model_file
+   use anm_io_vrml, only: vrml_mesh_type, write_vrml_file
    use anm_sh_expansion, only: sh_truncate
    implicit none
    private
 
-   public :: run_job
+   public :: run_job, check_run_resources
 
    !> Program version written into model files.
    character(len=*), parameter, public :: anm_version = "0.2.0"
@@ -41,7 +44,8 @@ contains
       type(model_type) :: model
       type(particle_kind_type), allocatable :: kinds(:)
       integer, allocatable :: kind_of(:)
-      character(len=:), allocatable :: dir, base
+      character(len=:), allocatable :: dir, base, tmp
+      type(output_set_type) :: set
 
       call read_config(path, cfg, error)
       if (allocated(error)) return
@@ -51,6 +55,18 @@ contains
          error%message = path//": &output: directory: "//error%message
          return
       end if
+      ! before the long work: the output folder takes files, the request fits in memory
+      call check_writable(dir, error)
+      if (allocated(error)) then
+         error%message = path//": &output: directory: "//error%message
+         return
+      end if
+      call check_run_resources(cfg, error)
+      if (allocated(error)) then
+         error%message = path//": "//error%message
+         return
+      end if
+      call remove_stale_temps(dir)
       base = join_path(dir, trim(cfg%output%name))
       call run_parking(cfg, model, kinds, kind_of, error, progress_unit)
       if (allocated(error)) return
@@ -61,25 +77,34 @@ contains
       model%layer_unit = thickness_unit_keyword(cfg%shells%unit)
       model%layer_mode = shell_mode_name(cfg%shells%mode)
       if (present(threads)) model%threads = threads
-      call write_model(base//".h5", model, error)
+      ! every output to a temporary name first; renamed together once all are complete
+      call set%add(base//".h5", tmp)
+      call write_model_file(tmp, model, error, shown=base//".h5")
+      if (allocated(error)) goto 99
+      call set%add(base//"-summary.csv", tmp)
+      call write_summary_csv_file(tmp, model, error, shown=base//"-summary.csv")
+      if (allocated(error)) goto 99
+      if (cfg%output%vrml) then
+         call write_model_vrml(cfg, model, kinds, kind_of, base, set, error)
+         if (allocated(error)) goto 99
+      end if
+      call set%commit(error)
       if (allocated(error)) return
       call write_summary(out_unit, model)
-      call write_summary_csv(base//"-summary.csv", model, error)
-      if (allocated(error)) return
-      if (cfg%output%vrml) then
-         call write_model_vrml(cfg, model, kinds, kind_of, base, error)
-         if (allocated(error)) return
-      end if
       write (out_unit, '(a)') "model: "//base//".h5; summary: "//base//"-summary.csv"// &
          merge("; VRML: "//base//".wrl", repeat(" ", len(base) + 12), cfg%output%vrml)
+      flush (out_unit)
+      return
+99    call set%discard()
    end subroutine run_job
 
-   subroutine write_model_vrml(cfg, model, kinds, kind_of, base, error)
+   subroutine write_model_vrml(cfg, model, kinds, kind_of, base, set, error)
       type(run_config_type), intent(in) :: cfg
       type(model_type), intent(in) :: model
       type(particle_kind_type), intent(in) :: kinds(:)
       integer, intent(in) :: kind_of(:)
       character(len=*), intent(in) :: base
+      type(output_set_type), intent(inout) :: set
       type(error_type), allocatable, intent(out) :: error
       type(vrml_mesh_type), allocatable :: meshes(:)
       integer, allocatable :: mesh_of(:), inst_of(:)
@@ -87,7 +112,7 @@ contains
                                                       0.85_wp, 0.80_wp, 0.60_wp, 0.60_wp, 0.60_wp, 0.65_wp, &
                                                       0.45_wp, 0.55_wp, 0.45_wp, 0.70_wp, 0.50_wp, 0.50_wp], [3, 6])
       integer :: nk, l, k, p, nlay, f, nfile, n
-      character(len=:), allocatable :: name
+      character(len=:), allocatable :: name, tmp
 
       nk = size(kinds)
       nlay = cfg%shells%nlayer
@@ -128,10 +153,65 @@ contains
          else
             name = base//"-layer"//to_string(f - 1)//".wrl"
          end if
-         call write_vrml(name, model%box, meshes, mesh_of, model%center(:, inst_of), model%rotation(:, :, inst_of), &
-                         model%scale(inst_of), error)
+         call set%add(name, tmp)
+         call write_vrml_file(tmp, model%box, meshes, mesh_of, model%center(:, inst_of), &
+                              model%rotation(:, :, inst_of), model%scale(inst_of), error, shown=name)
          if (allocated(error)) return
          deallocate (mesh_of, inst_of)
       end do
    end subroutine write_model_vrml
+
+   !> Refuse a run whose memory estimate exceeds the memory available, before parking: particles
+   !> (upper estimate from the box volume, the fractions and the smallest particle of each sieve),
+   !> particle kinds (shapes times the sieves using them) and synthetic shapes. The message names
+   !> the estimate and the variable to change.
+   subroutine check_run_resources(cfg, error)
+      !> Validated configuration.
+      type(run_config_type), intent(in) :: cfg
+      !> Error naming the estimate and the variable to change.
+      type(error_type), allocatable, intent(out) :: error
+      real(wp) :: particles, kinds, synth, total
+      integer :: s, nsynth
+      character(len=:), allocatable :: variable
+
+      associate (ns => cfg%sieves%nsieve)
+         particles = particle_count_estimate(cfg%box%length, cfg%sieves%min_width(:ns), cfg%sieves%target_fraction(:ns))
+      end associate
+      kinds = 0.0_wp
+      nsynth = 0
+      do s = 1, cfg%sieves%nsieve
+         if (trim(cfg%sieves%source(s)) == "synthetic") then
+            kinds = kinds + real(max(0, cfg%synthetic%count), wp)
+            nsynth = nsynth + 1
+         else
+            kinds = kinds + real(shape_file_count(trim(cfg%sieves%source(s))), wp)
+         end if
+      end do
+      synth = 0.0_wp
+      if (nsynth > 0) synth = shape_memory(real(max(0, cfg%synthetic%count), wp), cfg%synthetic%params%nmax)
+      total = run_memory_estimate(particles, kinds, cfg%shells%nlayer) + synth
+      if (nsynth > 0 .and. synth + kinds * 5.0e6_wp > 0.5_wp * total) then
+         variable = "&synthetic count (= "//to_string(cfg%synthetic%count)//")"
+      else
+         variable = "the box (&box length) or the fractions (&sieves fraction), or use larger sieves (about " &
+                    //to_string(nint(min(particles, 1.0e15_wp), i8))//" particles estimated)"
+      end if
+      call check_memory(total, "this run", variable, error)
+   end subroutine check_run_resources
+
+   !> Number of shape files a source names (a folder: its *.dat files; a file: 1).
+   function shape_file_count(source) result(n)
+      character(len=*), intent(in) :: source
+      integer :: n, i
+      type(string_type), allocatable :: names(:)
+      type(error_type), allocatable :: error
+      n = 1
+      if (.not. is_directory(source)) return
+      call list_directory(source, names, error)
+      if (allocated(error)) return
+      n = 0
+      do i = 1, size(names)
+         if (is_shape_file_name(names(i)%s)) n = n + 1
+      end do
+   end function shape_file_count
 end module anm_cli_run

@@ -14,13 +14,16 @@ module anm_io_hdf5
       & h5tset_size_f, h5tclose_f, h5dget_type_f, h5tget_size_f, h5lexists_f, h5aexists_f, &
       & H5F_ACC_TRUNC_F, H5F_ACC_RDONLY_F, H5P_DATASET_CREATE_F, H5P_GROUP_CREATE_F, H5S_SCALAR_F, &
       & H5T_NATIVE_DOUBLE, H5T_NATIVE_INTEGER, H5T_FORTRAN_S1, h5eset_auto_f
-   use anm_core_kinds, only: wp
+   use, intrinsic :: iso_c_binding, only: c_ptr, c_char, c_null_char, c_null_ptr, c_loc, c_f_pointer, c_associated, &
+      & c_size_t
+   use anm_core_kinds, only: wp, i8
+   use anm_core_output, only: file_size
    use anm_core_error, only: error_type, fatal_error, error_code
    implicit none
    private
 
    public :: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, h5_read, &
-      & h5_read_attr, h5_dims, h5_exists, h5_read_fixed_strings
+      & h5_read_attr, h5_dims, h5_exists, h5_read_strings
 
    !> An open HDF5 file.
    type :: h5_file_type
@@ -30,7 +33,22 @@ module anm_io_hdf5
       integer(hid_t) :: id = -1
       !> Dataset and group creation property lists (timestamps off).
       integer(hid_t) :: dcpl = -1, gcpl = -1
+      !> Built in memory (HDF5's core driver) and written to `name` by h5_close.
+      logical :: in_memory = .false.
    end type h5_file_type
+
+   !> A string read from a file.
+   type :: h5_text_type
+      character(len=:), allocatable :: s
+   end type h5_text_type
+
+   interface
+      function c_strlen(p) bind(c, name="strlen") result(n)
+         import :: c_ptr, c_size_t
+         type(c_ptr), value, intent(in) :: p
+         integer(c_size_t) :: n
+      end function c_strlen
+   end interface
 
    !> Write a dataset (float64 or int32 arrays of rank 1-3, or a string).
    interface h5_write
@@ -61,23 +79,32 @@ contains
       call fatal_error(error, file%name//"::"//obj//": "//what, error_code%io)
    end subroutine fail
 
-   !> Create (truncate) a file for writing.
+   !> Create a file for writing. It is built in memory (HDF5's core driver, no backing store) and
+   !> written to disk by h5_close with checked writes: a full disk or a file-size limit is then an
+   !> error of h5_close, and HDF5 never holds a half-written file (which it would try to flush
+   !> again, and crash, at program exit).
    subroutine h5_create(file, name, error)
+      use hdf5, only: h5pset_fapl_core_f, H5P_FILE_ACCESS_F, H5P_DEFAULT_F
       !> Handle.
       type(h5_file_type), intent(out) :: file
       !> File name.
       character(len=*), intent(in) :: name
       !> Error.
       type(error_type), allocatable, intent(out) :: error
-      integer :: st
+      integer :: st, s2
+      integer(hid_t) :: fapl
       file%name = name
       call h5open_f(st)
       call h5eset_auto_f(0, st)
-      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st)
+      call h5pcreate_f(H5P_FILE_ACCESS_F, fapl, st)
+      call h5pset_fapl_core_f(fapl, int(4 * 1024 * 1024, size_t), .false., st)
+      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st, H5P_DEFAULT_F, fapl)
+      call h5pclose_f(fapl, s2)
       if (st /= 0) then
          call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
          return
       end if
+      file%in_memory = .true.
       call h5pcreate_f(H5P_DATASET_CREATE_F, file%dcpl, st)
       call h5pset_obj_track_times_f(file%dcpl, .false., st)
       call h5pcreate_f(H5P_GROUP_CREATE_F, file%gcpl, st)
@@ -106,15 +133,58 @@ contains
       if (st /= 0) call fatal_error(error, name//": not a readable HDF5 file", error_code%io)
    end subroutine h5_open_read
 
-   !> Close a file.
+   !> Close a file; a file created by h5_create is written to disk here (every write and the close
+   !> checked; errors name the file and the reason).
    subroutine h5_close(file, error)
+      use hdf5, only: h5fflush_f, h5fget_file_image_f, H5F_SCOPE_GLOBAL_F
       !> Handle.
       type(h5_file_type), intent(inout) :: file
       !> Error.
       type(error_type), allocatable, intent(out) :: error
-      integer :: st
+      integer :: st, unit, s2
+      integer(size_t) :: n
+      character(kind=c_char), allocatable, target :: image(:)
+      type(c_ptr) :: p
+      character(len=512) :: msg
       if (file%dcpl >= 0) call h5pclose_f(file%dcpl, st)
       if (file%gcpl >= 0) call h5pclose_f(file%gcpl, st)
+      file%dcpl = -1
+      file%gcpl = -1
+      if (file%in_memory) then
+         call h5fflush_f(file%id, H5F_SCOPE_GLOBAL_F, st)
+         p = c_null_ptr
+         if (st == 0) call h5fget_file_image_f(file%id, p, 0_size_t, st, n)
+         if (st == 0) then
+            allocate (image(max(1_size_t, n)))
+            p = c_loc(image)
+            call h5fget_file_image_f(file%id, p, n, st)
+         end if
+         call h5fclose_f(file%id, s2)
+         file%id = -1
+         file%in_memory = .false.
+         if (st /= 0) then
+            call fatal_error(error, file%name//": cannot build the HDF5 file image", error_code%io)
+            return
+         end if
+         open (newunit=unit, file=file%name, access="stream", form="unformatted", status="replace", &
+               action="write", iostat=st, iomsg=msg)
+         if (st == 0) write (unit, iostat=st, iomsg=msg) image(:n)
+         if (st == 0) flush (unit, iostat=st, iomsg=msg)
+         if (st == 0) then
+            close (unit, iostat=st, iomsg=msg)
+         else
+            close (unit, iostat=s2)
+         end if
+         if (st /= 0) then
+            call fatal_error(error, file%name//": writing the HDF5 file failed ("//trim(msg)//")", error_code%io)
+         else if (file_size(file%name) /= int(n, i8)) then
+            ! gfortran does not report a short write through iostat: compare with the size on disk
+            call fatal_error(error, file%name//": writing the HDF5 file failed: "//int_text(int(max(0_i8, &
+                             file_size(file%name)) / 1024))//" of "//int_text(int(n / 1024))// &
+                             " kB reached the disk (disk full or file-size limit)", error_code%io)
+         end if
+         return
+      end if
       call h5fclose_f(file%id, st)
       if (st /= 0) call fatal_error(error, file%name//": error closing HDF5 file", error_code%io)
       file%id = -1
@@ -303,12 +373,13 @@ contains
       integer, intent(in) :: val
       type(error_type), allocatable, intent(out) :: error
       integer(hid_t) :: aid, space
-      integer :: st
+      integer :: st, s2
       call attr_common(file, path, name, H5T_NATIVE_INTEGER, aid, space, error)
       if (allocated(error)) return
       call h5awrite_f(aid, H5T_NATIVE_INTEGER, val, [1_hsize_t], st)
-      call h5aclose_f(aid, st)
-      call h5sclose_f(space, st)
+      call h5aclose_f(aid, s2)
+      call h5sclose_f(space, s2)
+      if (st /= 0) call fail(error, file, path//"@"//name, "write failed")
    end subroutine attr_int
 
    !> A 64-bit integer attribute (stored as int64, e.g. the seed).
@@ -341,12 +412,13 @@ contains
       real(wp), intent(in) :: val
       type(error_type), allocatable, intent(out) :: error
       integer(hid_t) :: aid, space
-      integer :: st
+      integer :: st, s2
       call attr_common(file, path, name, H5T_NATIVE_DOUBLE, aid, space, error)
       if (allocated(error)) return
       call h5awrite_f(aid, H5T_NATIVE_DOUBLE, val, [1_hsize_t], st)
-      call h5aclose_f(aid, st)
-      call h5sclose_f(space, st)
+      call h5aclose_f(aid, s2)
+      call h5sclose_f(space, s2)
+      if (st /= 0) call fail(error, file, path//"@"//name, "write failed")
    end subroutine attr_real
 
    subroutine attr_string(file, path, name, val, error)
@@ -355,14 +427,15 @@ contains
       character(len=*), intent(in) :: val
       type(error_type), allocatable, intent(out) :: error
       integer(hid_t) :: aid, space, dtype
-      integer :: st
+      integer :: st, s2
       call string_type(len(val), dtype)
       call attr_common(file, path, name, dtype, aid, space, error)
       if (allocated(error)) return
       call h5awrite_f(aid, dtype, val, [1_hsize_t], st)
-      call h5aclose_f(aid, st)
-      call h5sclose_f(space, st)
-      call h5tclose_f(dtype, st)
+      call h5aclose_f(aid, s2)
+      call h5sclose_f(space, s2)
+      if (st /= 0) call fail(error, file, path//"@"//name, "write failed")
+      call h5tclose_f(dtype, s2)
    end subroutine attr_string
 
    !> Dimensions of a dataset (Fortran order); error if it does not exist.
@@ -495,22 +568,23 @@ contains
       character(len=*), intent(in) :: path
       character(len=:), allocatable, intent(out) :: text
       type(error_type), allocatable, intent(out) :: error
-      integer(hid_t) :: dset, dtype
-      integer(size_t) :: n
-      integer :: st
+      type(h5_text_type), allocatable :: texts(:)
+      integer(hid_t) :: dset
       call open_dataset(file, path, dset, error)
       if (allocated(error)) return
-      call h5dget_type_f(dset, dtype, st)
-      call h5tget_size_f(dtype, n, st)
-      allocate (character(len=n) :: text)
-      call h5dread_f(dset, dtype, text, [1_hsize_t], st)
-      call h5tclose_f(dtype, st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) call fail(error, file, path, "read failed")
+      call read_text(file, path, dset, .false., texts, error)
+      if (allocated(error)) return
+      if (size(texts) /= 1) then
+         call fail(error, file, path, "expected one string, found "//int_text(size(texts)))
+         return
+      end if
+      text = texts(1)%s
    end subroutine read_string
 
-   !> Read a rank-1 dataset of fixed-length strings into `text` (each truncated to len(text)).
-   subroutine h5_read_fixed_strings(file, path, text, error)
+   !> Read a rank-1 dataset of strings, fixed- or variable-length (any writer: Anm writes fixed-length
+   !> ones, h5py variable-length UTF-8 ones by default), into `text` (each truncated to len(text);
+   !> trailing NUL and blank padding removed).
+   subroutine h5_read_strings(file, path, text, error)
       !> Handle.
       type(h5_file_type), intent(in) :: file
       !> Dataset path.
@@ -519,11 +593,10 @@ contains
       character(len=*), allocatable, intent(out) :: text(:)
       !> Error.
       type(error_type), allocatable, intent(out) :: error
-      integer(hid_t) :: dset, dtype
-      integer(size_t) :: n
+      type(h5_text_type), allocatable :: texts(:)
+      integer(hid_t) :: dset
       integer, allocatable :: dims(:)
-      character(len=:), allocatable :: buf(:)
-      integer :: st, i
+      integer :: i
       call h5_dims(file, path, dims, error)
       if (allocated(error)) return
       if (size(dims) /= 1) then
@@ -532,21 +605,128 @@ contains
       end if
       call open_dataset(file, path, dset, error)
       if (allocated(error)) return
-      call h5dget_type_f(dset, dtype, st)
-      call h5tget_size_f(dtype, n, st)
-      allocate (character(len=n) :: buf(dims(1)))
-      call h5dread_f(dset, dtype, buf, int(dims, hsize_t), st)
-      call h5tclose_f(dtype, st)
-      call h5dclose_f(dset, st)
-      if (st /= 0) then
-         call fail(error, file, path, "read failed")
-         return
-      end if
-      allocate (text(dims(1)))
-      do i = 1, dims(1)
-         text(i) = buf(i)
+      call read_text(file, path, dset, .false., texts, error)
+      if (allocated(error)) return
+      allocate (text(size(texts)))
+      do i = 1, size(texts)
+         text(i) = texts(i)%s
       end do
-   end subroutine h5_read_fixed_strings
+   end subroutine h5_read_strings
+
+   !> Read every string of a dataset or attribute `id` (closed on return) whether stored with a
+   !> fixed length (NUL- or space-padded) or a variable length; errors when it holds no strings.
+   subroutine read_text(file, path, id, is_attr, texts, error)
+      use hdf5, only: h5aget_type_f, h5aget_space_f, h5sget_simple_extent_npoints_f, h5tget_class_f, &
+         & h5tis_variable_str_f, h5dvlen_reclaim_f, H5T_STRING_F, H5P_DEFAULT_F
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer(hid_t), intent(in) :: id
+      logical, intent(in) :: is_attr
+      type(h5_text_type), allocatable, intent(out) :: texts(:)
+      type(error_type), allocatable, intent(out) :: error
+      integer(hid_t) :: dtype, space
+      integer(hsize_t) :: npoints
+      integer(size_t) :: sz
+      integer :: st, s2, cls, i, n
+      logical :: vlen
+      type(c_ptr), allocatable, target :: ptrs(:)
+      type(c_ptr) :: bufp
+      character(kind=c_char), allocatable, target :: bytes(:)
+      character(kind=c_char), pointer :: chars(:)
+
+      if (is_attr) then
+         call h5aget_type_f(id, dtype, st)
+         call h5aget_space_f(id, space, s2)
+      else
+         call h5dget_type_f(id, dtype, st)
+         call h5dget_space_f(id, space, s2)
+      end if
+      call h5tget_class_f(dtype, cls, st)
+      if (st /= 0 .or. cls /= H5T_STRING_F) then
+         call fail(error, file, path, "expected a string, found another data type")
+         goto 90
+      end if
+      call h5sget_simple_extent_npoints_f(space, npoints, st)
+      n = int(npoints)
+      allocate (texts(n))
+      call h5tis_variable_str_f(dtype, vlen, st)
+      if (vlen) then
+         allocate (ptrs(max(1, n)))
+         ptrs = c_null_ptr
+         if (is_attr) then
+            bufp = c_loc(ptrs)
+            call h5aread_f(id, dtype, bufp, st)
+         else
+            bufp = c_loc(ptrs)
+            call h5dread_f(id, dtype, bufp, st)
+         end if
+         if (st /= 0) then
+            call fail(error, file, path, "read failed (variable-length string)")
+            goto 90
+         end if
+         do i = 1, n
+            if (c_associated(ptrs(i))) then
+               call c_f_pointer(ptrs(i), chars, [c_strlen(ptrs(i))])
+               texts(i)%s = from_chars(chars)
+            else
+               texts(i)%s = ""
+            end if
+         end do
+         bufp = c_loc(ptrs)
+         call h5dvlen_reclaim_f(dtype, space, H5P_DEFAULT_F, bufp, s2)
+      else
+         call h5tget_size_f(dtype, sz, st)
+         allocate (bytes(max(1, int(sz) * n)))
+         if (is_attr) then
+            bufp = c_loc(bytes)
+            call h5aread_f(id, dtype, bufp, st)
+         else
+            bufp = c_loc(bytes)
+            call h5dread_f(id, dtype, bufp, st)
+         end if
+         if (st /= 0) then
+            call fail(error, file, path, "read failed (fixed-length string)")
+            goto 90
+         end if
+         do i = 1, n
+            texts(i)%s = from_chars(bytes((i - 1) * int(sz) + 1:i * int(sz)))
+         end do
+      end if
+90    call h5tclose_f(dtype, s2)
+      call h5sclose_f(space, s2)
+      if (is_attr) then
+         call h5aclose_f(id, s2)
+      else
+         call h5dclose_f(id, s2)
+      end if
+   end subroutine read_text
+
+   !> Text of a byte array up to its first NUL, trailing blanks removed.
+   pure function from_chars(chars) result(text)
+      character(kind=c_char), intent(in) :: chars(:)
+      character(len=:), allocatable :: text
+      integer :: i, n
+      n = size(chars)
+      do i = 1, size(chars)
+         if (chars(i) == c_null_char) then
+            n = i - 1
+            exit
+         end if
+      end do
+      allocate (character(len=n) :: text)
+      do i = 1, n
+         text(i:i) = chars(i)
+      end do
+      text = trim(text)
+   end function from_chars
+
+   pure function int_text(i) result(s)
+      integer, intent(in) :: i
+      character(len=:), allocatable :: s
+      character(len=24) :: buf
+      write (buf, '(i0)') i
+      s = trim(buf)
+   end function int_text
 
    subroutine open_attr(file, path, name, aid, error)
       use hdf5, only: h5oopen_f, h5oclose_f
@@ -578,12 +758,13 @@ contains
       integer, intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
       integer(hid_t) :: aid
-      integer :: st
+      integer :: st, s2
       val = 0
       call open_attr(file, path, name, aid, error)
       if (allocated(error)) return
       call h5aread_f(aid, H5T_NATIVE_INTEGER, val, [1_hsize_t], st)
-      call h5aclose_f(aid, st)
+      call h5aclose_f(aid, s2)
+      if (st /= 0) call fail(error, file, path//"@"//name, "read failed (expected an integer)")
    end subroutine read_attr_int
 
    subroutine read_attr_real(file, path, name, val, error)
@@ -592,30 +773,30 @@ contains
       real(wp), intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
       integer(hid_t) :: aid
-      integer :: st
+      integer :: st, s2
       val = 0.0_wp
       call open_attr(file, path, name, aid, error)
       if (allocated(error)) return
       call h5aread_f(aid, H5T_NATIVE_DOUBLE, val, [1_hsize_t], st)
-      call h5aclose_f(aid, st)
+      call h5aclose_f(aid, s2)
+      if (st /= 0) call fail(error, file, path//"@"//name, "read failed (expected a number)")
    end subroutine read_attr_real
 
    subroutine read_attr_string(file, path, name, val, error)
-      use hdf5, only: h5aget_type_f
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path, name
       character(len=:), allocatable, intent(out) :: val
       type(error_type), allocatable, intent(out) :: error
-      integer(hid_t) :: aid, dtype
-      integer(size_t) :: n
-      integer :: st
+      type(h5_text_type), allocatable :: texts(:)
+      integer(hid_t) :: aid
       call open_attr(file, path, name, aid, error)
       if (allocated(error)) return
-      call h5aget_type_f(aid, dtype, st)
-      call h5tget_size_f(dtype, n, st)
-      allocate (character(len=n) :: val)
-      call h5aread_f(aid, dtype, val, [1_hsize_t], st)
-      call h5tclose_f(dtype, st)
-      call h5aclose_f(aid, st)
+      call read_text(file, path//"@"//name, aid, .true., texts, error)
+      if (allocated(error)) return
+      if (size(texts) /= 1) then
+         call fail(error, file, path//"@"//name, "expected one string, found "//int_text(size(texts)))
+         return
+      end if
+      val = texts(1)%s
    end subroutine read_attr_string
 end module anm_io_hdf5

@@ -1,27 +1,34 @@
 !> The model: what a run produces and `anm verify` and the Python package read. Stored in the
-!> HDF5 model file, contract version 1 (DESIGN.md; user documentation in docs/model-file.md).
+!> HDF5 model file, contract version 1 (docs/model-file.md; units, frames and conventions in docs/conventions.md).
 !>
 !> Memory per particle: shape index, centre, rotation, scale, order, sieve (about 110 bytes) and
 !> the shell thicknesses; never a copy of the surface.
 !>
 !> Usage:
-!>     call write_model("out/model.h5", model, error)    ! atomic: temporary name, then rename
+!>     call write_model("out/model.h5", model, error)    ! safe: temporary name, then rename
 !>     call read_model("out/model.h5", model, error)
 module anm_io_model
-   use, intrinsic :: iso_c_binding, only: c_char, c_int, c_null_char
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
+   use anm_core_text, only: printable
+   use anm_core_output, only: output_set_type
    use anm_sh_expansion, only: sh_expansion_type, sh_from_rows, sh_to_rows
    use anm_io_hdf5, only: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, &
-      & h5_read, h5_read_attr, h5_exists, h5_read_fixed_strings
+      & h5_read, h5_read_attr, h5_exists, h5_read_strings
    implicit none
    private
 
-   public :: model_type, write_model, read_model, model_format_version
+   public :: model_type, write_model, write_model_file, read_model, validate_model, model_format_version, &
+      & rotation_tolerance
 
    !> Version of the model-file contract written.
    integer, parameter :: model_format_version = 1
+
+   !> Tolerance of the rotation check on reading: every entry of R^T R - I and det R - 1 within
+   !> 1e-6 (float64 rotations written by Anm are orthonormal to about 1e-15; 1e-6 also accepts
+   !> rotations stored in float32 by other writers).
+   real(wp), parameter :: rotation_tolerance = 1.0e-6_wp
 
    !> A packed model.
    type :: model_type
@@ -72,17 +79,12 @@ module anm_io_model
       character(len=:), allocatable :: version
    end type model_type
 
-   interface
-      function c_rename(old, new) bind(c, name="rename") result(stat)
-         import :: c_char, c_int
-         character(kind=c_char), intent(in) :: old(*), new(*)
-         integer(c_int) :: stat
-      end function c_rename
-   end interface
 
 contains
 
-   !> Write the model file atomically: to PATH.tmp, then rename to PATH.
+   !> Write the model file safely: to a temporary name in the same folder (unique per process),
+   !> every HDF5 call and the close checked, then renamed to PATH; on error the temporary is removed
+   !> and an earlier PATH is kept.
    subroutine write_model(path, model, error)
       !> Model file name.
       character(len=*), intent(in) :: path
@@ -90,17 +92,37 @@ contains
       type(model_type), intent(in) :: model
       !> Error naming file::dataset.
       type(error_type), allocatable, intent(out) :: error
+      type(output_set_type) :: set
+      character(len=:), allocatable :: tmp
+      call set%add(path, tmp)
+      call write_model_file(tmp, model, error, shown=path)
+      if (allocated(error)) then
+         call set%discard()
+         return
+      end if
+      call set%commit(error)
+   end subroutine write_model
+
+   !> Write the model file `path` directly (the caller chooses a temporary name: see write_model).
+   !> Errors name `shown` (default: path) and the dataset.
+   subroutine write_model_file(path, model, error, shown)
+      !> Model file name.
+      character(len=*), intent(in) :: path
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Error naming file::dataset.
+      type(error_type), allocatable, intent(out) :: error
+      !> Name used in messages (the final name when writing a temporary).
+      character(len=*), intent(in), optional :: shown
       type(h5_file_type) :: f
       type(error_type), allocatable :: err2
-      character(len=:), allocatable :: tmp
       real(wp), allocatable :: coeffs(:, :, :), rot(:, :, :)
       complex(wp), allocatable :: c(:, :)
       integer, allocatable :: nmax(:)
       integer :: ns, ncoef, s, n, m, k, p, nmx
 
-      tmp = path//".tmp"
-      call h5_create(f, tmp, error)
-      if (allocated(error)) return
+      call h5_create(f, path, error)
+      if (allocated(error)) goto 98
       call h5_write_attr(f, "/", "format", "anm-model", error)
       if (allocated(error)) goto 99
       call h5_write_attr(f, "/", "format_version", model_format_version, error)
@@ -200,13 +222,13 @@ contains
       call h5_write_attr(f, "/run", "attempts", real(model%attempts, wp), error)
       if (allocated(error)) goto 99
       call h5_close(f, error)
-      if (allocated(error)) return
-      if (c_rename(tmp//c_null_char, trim(path)//c_null_char) /= 0) then
-         call fatal_error(error, path//": cannot rename "//tmp//" to the model file", error_code%io)
-      end if
-      return
+      goto 98
 99    call h5_close(f, err2)
-   end subroutine write_model
+98    if (allocated(error) .and. present(shown)) then
+         ! name the final file, not the temporary
+         if (index(error%message, path) == 1) error%message = shown//error%message(len(path) + 1:)
+      end if
+   end subroutine write_model_file
 
    !> The shell specification as group /shells: attributes nlayer, unit, mode; datasets thickness
    !> (nlayer, in unit) and colour (nlayer x 3 as numpy reads it). docs/model-file.md.
@@ -244,14 +266,15 @@ contains
       character(len=:), allocatable :: fmt
       real(wp), allocatable :: coeffs(:, :, :), rot(:, :, :), tmp1(:)
       integer, allocatable :: nmax(:), ivec(:)
-      integer :: ver, per, s, p, ns
+      integer :: ver, per, s, p, ns, k
 
       call h5_open_read(f, path, error)
       if (allocated(error)) return
       call h5_read_attr(f, "/", "format", fmt, error)
       if (allocated(error)) goto 99
       if (trim(fmt) /= "anm-model") then
-         call fatal_error(error, path//": not an Anm model file (format = '"//trim(fmt)//"')", error_code%format)
+         call fatal_error(error, path//": not an Anm model file (format = '"//printable(trim(fmt))//"')", &
+                          error_code%format)
          goto 99
       end if
       call h5_read_attr(f, "/", "format_version", ver, error)
@@ -275,6 +298,25 @@ contains
       call h5_read(f, "/shapes/nmax", nmax, error)
       if (allocated(error)) goto 99
       ns = size(nmax)
+      if (size(coeffs, 1) /= 2 .or. size(coeffs, 3) /= ns) then
+         call fatal_error(error, path//"::/shapes/coeffs: expected shape ("//to_string(ns)//", ncoef, 2) for " &
+                          //to_string(ns)//" shapes in /shapes/nmax", error_code%format)
+         goto 99
+      end if
+      do s = 1, ns
+         do k = 1, size(coeffs, 2)
+            if (.not. all(finite(coeffs(:, k, s)))) then
+               call fatal_error(error, path//"::/shapes/coeffs: shape "//to_string(s - 1)//", coefficient " &
+                                //to_string(k - 1)//" is not a finite number", error_code%format)
+               goto 99
+            end if
+         end do
+         if (.not. (coeffs(1, 1, s) > 0.0_wp)) then
+            call fatal_error(error, path//"::/shapes/coeffs: shape "//to_string(s - 1)//" has a_00 = " &
+                             //to_string(coeffs(1, 1, s))//" (must be > 0: the mean radius)", error_code%format)
+            goto 99
+         end if
+      end do
       allocate (model%shapes(ns))
       do s = 1, ns
          if (nmax(s) < 0 .or. (nmax(s) + 1)**2 > size(coeffs, 2)) then
@@ -284,20 +326,21 @@ contains
          end if
          model%shapes(s) = sh_from_rows(coeffs(:, :, s), nmax(s))
       end do
-      call h5_read_fixed_strings(f, "/shapes/name", model%shape_names, error)
+      call h5_read_strings(f, "/shapes/name", model%shape_names, error)
       if (allocated(error)) goto 99
       call h5_read(f, "/particles/shape", ivec, error)
       if (allocated(error)) goto 99
       model%np = size(ivec)
       model%shape = ivec + 1
-      if (any(model%shape < 1 .or. model%shape > ns)) then
-         call fatal_error(error, path//"::/particles/shape: index out of range", error_code%format)
-         goto 99
-      end if
       call h5_read(f, "/particles/center", model%center, error)
       if (allocated(error)) goto 99
       call h5_read(f, "/particles/rotation", rot, error)
       if (allocated(error)) goto 99
+      if (any(shape(rot) /= [3, 3, model%np])) then
+         call fatal_error(error, path//"::/particles/rotation: expected shape ("//to_string(model%np) &
+                          //", 3, 3), one matrix per particle of /particles/shape", error_code%format)
+         goto 99
+      end if
       allocate (model%rotation(3, 3, model%np))
       do p = 1, model%np
          model%rotation(:, :, p) = transpose(rot(:, :, p))
@@ -331,11 +374,9 @@ contains
       if (allocated(error)) goto 99
       call h5_read(f, "/run/namelist", model%namelist, error)
       if (allocated(error)) goto 99
-      if (size(model%center, 1) /= 3 .or. size(model%center, 2) /= model%np .or. size(model%scale) /= model%np) then
-         call fatal_error(error, path//"::/particles: datasets of inconsistent length", error_code%format)
-         goto 99
-      end if
       call h5_close(f, error)
+      if (allocated(error)) return
+      call validate_model(path, model, error)
       return
 99    call h5_close(f, err2)
    end subroutine read_model
@@ -366,4 +407,135 @@ contains
                           error_code%format)
       end if
    end subroutine read_shells
+
+   !> Check a model before it is used (run on every model read). Refuses, naming file::dataset and
+   !> the first bad particle or value (0-based, as in the file): datasets of inconsistent length;
+   !> box edges not finite or <= 0; a shape index outside /shapes; a particle order outside
+   !> 0..nmax of its shape; a sieve index outside /sieves; a centre not finite; a scale not finite
+   !> or <= 0; a rotation not finite, not orthonormal or a reflection (tolerance
+   !> `rotation_tolerance` on every entry of R^T R - I and on det R - 1); shell thicknesses not
+   !> finite or < 0. Shape coefficients (finite, a_00 > 0) are checked as they are read.
+   subroutine validate_model(path, model, error)
+      !> Model file (for messages).
+      character(len=*), intent(in) :: path
+      !> Model.
+      type(model_type), intent(in) :: model
+      !> Error naming file::dataset and the first bad value.
+      type(error_type), allocatable, intent(out) :: error
+      integer :: p, k, np, ns, nsieve
+      real(wp) :: r(3, 3), dev, det
+
+      np = model%np
+      ns = size(model%shapes)
+      nsieve = size(model%min_width)
+      do k = 1, 3
+         if (.not. (finite1(model%box(k)) .and. model%box(k) > 0.0_wp)) then
+            call bad("/box/length", "edge "//to_string(k - 1)//" = "//to_string(model%box(k)) &
+                     //" mm (must be finite and > 0)")
+            return
+         end if
+      end do
+      if (size(model%center, 1) /= 3 .or. size(model%center, 2) /= np) then
+         call bad("/particles/center", "expected shape ("//to_string(np)//", 3), one centre per particle")
+         return
+      end if
+      if (size(model%scale) /= np .or. size(model%nmax) /= np .or. size(model%sieve) /= np .or. &
+          size(model%shell_thickness, 2) /= np) then
+         call bad("/particles", "datasets of inconsistent length (/particles/shape has "//to_string(np)//")")
+         return
+      end if
+      if (size(model%max_width) /= nsieve .or. size(model%target_fraction) /= nsieve .or. &
+          size(model%achieved_fraction) /= nsieve .or. size(model%count) /= nsieve) then
+         call bad("/sieves", "datasets of inconsistent length (/sieves/min_width has "//to_string(nsieve)//")")
+         return
+      end if
+      if (size(model%shape_names) /= ns) then
+         call bad("/shapes/name", to_string(size(model%shape_names))//" names for "//to_string(ns)//" shapes")
+         return
+      end if
+      do p = 1, np
+         if (model%shape(p) < 1 .or. model%shape(p) > ns) then
+            call bad("/particles/shape", "particle "//to_string(p - 1)//": shape index "//to_string(model%shape(p) - 1) &
+                     //" outside 0.."//to_string(ns - 1))
+            return
+         end if
+         if (model%nmax(p) < 0 .or. model%nmax(p) > model%shapes(model%shape(p))%nmax) then
+            call bad("/particles/nmax", "particle "//to_string(p - 1)//": order "//to_string(model%nmax(p)) &
+                     //" outside 0.."//to_string(model%shapes(model%shape(p))%nmax)//" of its shape")
+            return
+         end if
+         if (model%sieve(p) < 1 .or. model%sieve(p) > nsieve) then
+            call bad("/particles/sieve", "particle "//to_string(p - 1)//": sieve index "//to_string(model%sieve(p) - 1) &
+                     //" outside 0.."//to_string(nsieve - 1))
+            return
+         end if
+         if (.not. all(finite(model%center(:, p)))) then
+            call bad("/particles/center", "particle "//to_string(p - 1)//": centre ("//triple(model%center(:, p)) &
+                     //") is not finite")
+            return
+         end if
+         if (.not. (finite1(model%scale(p)) .and. model%scale(p) > 0.0_wp)) then
+            call bad("/particles/scale", "particle "//to_string(p - 1)//": scale "//to_string(model%scale(p)) &
+                     //" (must be finite and > 0)")
+            return
+         end if
+         r = model%rotation(:, :, p)
+         if (.not. all(finite(reshape(r, [9])))) then
+            call bad("/particles/rotation", "particle "//to_string(p - 1)//": rotation is not finite")
+            return
+         end if
+         dev = maxval(abs(matmul(transpose(r), r) - identity()))
+         det = r(1, 1) * (r(2, 2) * r(3, 3) - r(2, 3) * r(3, 2)) - r(1, 2) * (r(2, 1) * r(3, 3) - r(2, 3) * r(3, 1)) &
+               + r(1, 3) * (r(2, 1) * r(3, 2) - r(2, 2) * r(3, 1))
+         if (dev > rotation_tolerance) then
+            call bad("/particles/rotation", "particle "//to_string(p - 1)//": rotation is not orthonormal " &
+                     //"(largest entry of |R^T R - I| = "//to_string(dev)//", tolerance "//to_string(rotation_tolerance)//")")
+            return
+         end if
+         if (abs(det - 1.0_wp) > rotation_tolerance) then
+            call bad("/particles/rotation", "particle "//to_string(p - 1)//": determinant "//to_string(det) &
+                     //" (a reflection, not a rotation: must be +1 within "//to_string(rotation_tolerance)//")")
+            return
+         end if
+         if (size(model%shell_thickness, 1) > 0) then
+            if (.not. all(finite(model%shell_thickness(:, p)) .and. model%shell_thickness(:, p) >= 0.0_wp)) then
+               call bad("/particles/shell_thickness", "particle "//to_string(p - 1)// &
+                        ": thickness not finite or negative")
+               return
+            end if
+         end if
+      end do
+   contains
+      subroutine bad(dataset, what)
+         character(len=*), intent(in) :: dataset, what
+         call fatal_error(error, path//"::"//dataset//": "//what, error_code%format)
+      end subroutine bad
+   end subroutine validate_model
+
+   elemental function finite(x) result(ok)
+      real(wp), intent(in) :: x
+      logical :: ok
+      ok = x == x .and. abs(x) <= huge(x)
+   end function finite
+
+   pure function finite1(x) result(ok)
+      real(wp), intent(in) :: x
+      logical :: ok
+      ok = x == x .and. abs(x) <= huge(x)
+   end function finite1
+
+   pure function identity() result(e)
+      real(wp) :: e(3, 3)
+      integer :: i
+      e = 0.0_wp
+      do i = 1, 3
+         e(i, i) = 1.0_wp
+      end do
+   end function identity
+
+   pure function triple(x) result(s)
+      real(wp), intent(in) :: x(3)
+      character(len=:), allocatable :: s
+      s = to_string(x(1))//", "//to_string(x(2))//", "//to_string(x(3))
+   end function triple
 end module anm_io_model
