@@ -283,6 +283,7 @@ contains
       write (rp%progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", st%sieve, ": placed ", st%res%count, &
          ", fraction ", st%res%vol / rp%vbox, " of ", st%target_fraction, ", ", &
          real(run%attempts, wp) / max(1.0e-9_wp, real(t1 - run%t0, wp) / run%rate), " attempts/s"
+      flush (rp%progress_unit)   ! a log file shows the line now, not at exit (stderr may be block-buffered)
       run%tlast = t1
    end subroutine progress_line
 
@@ -309,5 +310,6 @@ contains
          write (u, '(a,i0,a,f8.5,a)') "warning: sieve ", st%sieve, " ended ", st%target_fraction - f, &
             " short of its target (attempts exhausted)"
       end if
+      flush (u)
    end subroutine sieve_report
 end module anm_parking_rsa
