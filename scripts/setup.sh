@@ -48,7 +48,7 @@ if [ "$installed" != "$(realpath "$here/post")" ]; then
     "$python" -m pip install -q --disable-pip-version-check --root-user-action=ignore --no-build-isolation --no-deps -e "$here/post"
 fi
 
-# the compiled kernels of anm_post (numpy.f2py + meson from src/api/slice_api.f90 and the program's
+# the compiled kernels of anm_post (numpy.f2py + meson from src/api/slice.f90 and the program's
 # sources, post/meson.build): configured once in build/post-ext, rebuilt by ninja when a source
 # changed (a no-op otherwise), then copied into post/anm_post/ when it differs
 ext_build="$here/build/post-ext"

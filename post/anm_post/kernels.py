@@ -1,5 +1,5 @@
 """Typed wrappers of the Fortran kernels (module `_kernels`, built by numpy.f2py from
-src/api/slice_api.f90 and the program's own sources). Arrays are converted to the dtype and
+src/api/slice.f90 and the program's own sources). Arrays are converted to the dtype and
 (Fortran) order the adapter expects; a non-zero status becomes an AnmPostError.
 
 Conventions: shapes are passed as in the model file, coeffs (nshape, ncoef, 2) and nmax (nshape,);
