@@ -14,6 +14,7 @@ module anm_cli_run
    use anm_config_job, only: run_config_type, read_config
    use anm_config_shells, only: thickness_unit_keyword, shell_mode_name
    use anm_parking_engine, only: run_parking, particle_kind_type
+   use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_summary, only: write_summary, write_summary_csv_file
    use anm_io_model, only: model_type, write_model_file
    use anm_io_vrml, only: vrml_mesh_type, write_vrml_file
@@ -29,7 +30,7 @@ module anm_cli_run
 contains
 
    !> Run the job of a namelist file.
-   subroutine run_job(path, out_unit, progress_unit, error, threads)
+   subroutine run_job(path, out_unit, progress_unit, error, threads, dist)
       !> Namelist file.
       character(len=*), intent(in) :: path
       !> Unit for the summary table.
@@ -40,6 +41,9 @@ contains
       type(error_type), allocatable, intent(out) :: error
       !> Number of threads (recorded in the model file).
       integer, intent(in), optional :: threads
+      !> The MPI build: phase 1 spread over the processes, which all park the same model; only
+      !> the writer checks the output folder, prints progress and writes the outputs.
+      class(phase1_distributor_type), intent(in), optional :: dist
       type(run_config_type) :: cfg
       type(model_type) :: model
       type(particle_kind_type), allocatable :: kinds(:)
@@ -49,6 +53,12 @@ contains
 
       call read_config(path, cfg, error)
       if (allocated(error)) return
+      if (present(dist)) then
+         if (.not. dist%writer) then
+            call run_parking(cfg, model, kinds, kind_of, error, dist=dist)
+            return
+         end if
+      end if
       dir = trim(cfg%output%directory)
       call make_directory(dir, error)
       if (allocated(error)) then
@@ -68,7 +78,7 @@ contains
       end if
       call remove_stale_temps(dir)
       base = join_path(dir, trim(cfg%output%name))
-      call run_parking(cfg, model, kinds, kind_of, error, progress_unit)
+      call run_parking(cfg, model, kinds, kind_of, error, progress_unit, dist=dist)
       if (allocated(error)) return
       model%version = anm_version
       ! the shell specification travels with the model (/shells)

@@ -24,6 +24,7 @@ module anm_parking_engine
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
+   use anm_parking_scheduler, only: phase1_distributor_type
    use anm_io_model, only: model_type
    use omp_lib, only: omp_get_max_threads
    implicit none
@@ -43,7 +44,7 @@ contains
 
    !> Build the model the configuration asks for. Progress goes to `progress_unit` (stderr in the
    !> program) about every two seconds.
-   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit, max_batch)
+   subroutine run_parking(cfg, model, kinds, kind_of, error, progress_unit, max_batch, dist)
       !> Validated configuration.
       type(run_config_type), intent(in) :: cfg
       !> The packed model.
@@ -59,6 +60,8 @@ contains
       !> Largest batch of speculated particles (default: no limit; 1 runs the plain serial
       !> algorithm, which tests use as the reference).
       integer, intent(in), optional :: max_batch
+      !> Phase 1 spread over processes (the MPI build); batches sized for all their threads.
+      class(phase1_distributor_type), intent(in), optional :: dist
       type(kind_set_type) :: ks
       type(packing_type) :: pk
       type(attempt_params_type), allocatable :: ap(:)
@@ -79,6 +82,10 @@ contains
          ap(s) = attempt_params(cfg, ks, s)
       end do
       rp = rsa_params(cfg, progress_unit, max_batch)
+      if (present(dist)) then
+         allocate (rp%dist, source=dist)
+         rp%nthreads = dist%workers
+      end if
       ! particles speculated per batch: any value gives the same model (anm_parking_scheduler),
       ! so the batch adapts to the machine and to the sieve (next_batch)
       run%batch = min(rp%nthreads, rp%batch_limit)

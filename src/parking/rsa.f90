@@ -19,7 +19,7 @@ module anm_parking_rsa
    use anm_parking_kinds, only: kind_set_type
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_attempts, only: attempt_params_type, first_kind_of
-   use anm_parking_scheduler, only: batch_type, next_batch
+   use anm_parking_scheduler, only: batch_type, next_batch, phase1_distributor_type
    use anm_parking_void_grid, only: void_grid_type, new_void_grid
    implicit none
    private
@@ -49,6 +49,8 @@ module anm_parking_rsa
       integer :: nlayer = 0
       !> Unit for progress lines (< 0: none).
       integer :: progress_unit = -1
+      !> Phase 1 spread over processes (the MPI build; unallocated: this process alone).
+      class(phase1_distributor_type), allocatable :: dist
    end type rsa_params_type
 
    !> What a sieve achieved.
@@ -125,7 +127,7 @@ contains
       type(batch_type) :: bt
       integer :: k, j, batch_now, np_blocked
       integer(i8) :: tp1, t1
-      real(wp) :: r_in
+      real(wp) :: r_in, seconds
       r_in = 0.0_wp
       if (rp%void .or. .not. rp%lazy) then
          call ks%build(pk%kinds, [(k, k=ap%first_kind, ap%first_kind + ap%nkind - 1)], error)
@@ -142,8 +144,11 @@ contains
          ! void placement: a batch never crosses an epoch boundary (see void_epoch)
          if (rp%void) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
          call system_clock(tp1)
-         call bt%speculate(batch_now, ap, pk, vg, st%nstream)
+         call bt%speculate(batch_now, ap, pk, vg, st%nstream, rp%dist)
          call system_clock(t1)
+         seconds = real(t1 - tp1, wp) / run%rate
+         ! every process sizes the next batch alike
+         if (allocated(rp%dist)) seconds = rp%dist%agree(seconds)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
          if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
             do j = np_blocked + 1, pk%np
@@ -153,7 +158,7 @@ contains
             if (vg%stale > vg%nfree / 4) call vg%compact()
             if (vg%nfree == 0) st%done = .true.
          end if
-         run%batch = min(rp%batch_limit, next_batch(batch_now, real(t1 - tp1, wp) / run%rate, st%target - st%res%vol, &
+         run%batch = min(rp%batch_limit, next_batch(batch_now, seconds, st%target - st%res%vol, &
                                                     st%res%vol, st%res%count, rp%nthreads))
          call progress_line(rp, st, run)
       end do

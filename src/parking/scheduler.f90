@@ -16,6 +16,10 @@
 !>        ... decide; if parked: call pk%add(...); call bt%accept(b)
 !>     end do
 !>     n = next_batch(n, seconds, missing, vol, count, nthreads)
+!>
+!> Phase 1 may also run on several processes: a `phase1_distributor_type` (the MPI build's
+!> anm_mpi_distributor, mpi/src/) gives each process some members (`run_phase1` with a first
+!> member and a stride) and leaves every member's attempt on every process as one process would.
 module anm_parking_scheduler
    use anm_core_kinds, only: wp
    use anm_parking_attempts, only: attempt_type, attempt_params_type
@@ -24,7 +28,7 @@ module anm_parking_scheduler
    implicit none
    private
 
-   public :: batch_type, next_batch, first_in_reach
+   public :: batch_type, next_batch, first_in_reach, run_phase1, phase1_distributor_type
 
    !> One batch of speculated particles.
    type :: batch_type
@@ -51,11 +55,55 @@ module anm_parking_scheduler
       procedure :: accept
    end type batch_type
 
+   !> Phase 1 spread over processes that each hold the whole packing (replicated data). After
+   !> `phase1`, every process holds every member's attempt exactly as `run_phase1` over all members
+   !> leaves it; phase 2 then runs identically everywhere. Extended by the MPI build; the serial
+   !> program uses none.
+   type, abstract :: phase1_distributor_type
+      !> Threads over all processes (sizes the batches, the same on every process).
+      integer :: workers = 1
+      !> This process writes the outputs and progress lines.
+      logical :: writer = .true.
+   contains
+      !> Phase 1 of the batch `at` on every process (collective).
+      procedure(distributed_phase1), deferred :: phase1
+      !> The largest value over the processes (collective): values that steer the run, such as
+      !> the batch clock, must agree.
+      procedure(agreed_value), deferred :: agree
+   end type phase1_distributor_type
+
+   abstract interface
+      subroutine distributed_phase1(self, at, ap, pk, vg, nstream)
+         import :: phase1_distributor_type, attempt_type, attempt_params_type, packing_type, void_grid_type
+         !> Distributor.
+         class(phase1_distributor_type), intent(in) :: self
+         !> Attempts of the batch.
+         type(attempt_type), intent(inout) :: at(:)
+         !> Parameters of the sieve.
+         type(attempt_params_type), intent(in) :: ap
+         !> Packing (frozen, the same on every process).
+         type(packing_type), intent(in) :: pk
+         !> Void grid.
+         type(void_grid_type), intent(in) :: vg
+         !> Particles of the sieve before this batch.
+         integer, intent(in) :: nstream
+      end subroutine distributed_phase1
+
+      function agreed_value(self, x) result(y)
+         import :: phase1_distributor_type, wp
+         !> Distributor.
+         class(phase1_distributor_type), intent(in) :: self
+         !> This process' value.
+         real(wp), intent(in) :: x
+         real(wp) :: y
+      end function agreed_value
+   end interface
+
 contains
 
    !> Phase 1: particles nstream + 1 .. nstream + n of the sieve each find their first attempt that
    !> fits the packing as it is (in parallel; each particle draws only from its own stream).
-   subroutine speculate(self, n, ap, pk, vg, nstream)
+   subroutine speculate(self, n, ap, pk, vg, nstream, dist)
       !> Batch.
       class(batch_type), intent(out) :: self
       !> Number of particles.
@@ -68,12 +116,18 @@ contains
       type(void_grid_type), intent(in) :: vg
       !> Particles of the sieve before this batch.
       integer, intent(in) :: nstream
+      !> Phase 1 spread over processes (absent: this process alone).
+      class(phase1_distributor_type), intent(in), optional :: dist
       real(wp), allocatable :: bx(:, :)
       integer :: b
       self%n = n
       allocate (self%at(n), self%br(n), self%alone(n), self%moved_flag(n), self%moved(n), bx(3, n))
       self%moved_flag = .false.
-      call run_phase1(self%at, ap, pk, vg, nstream)
+      if (present(dist)) then
+         call dist%phase1(self%at, ap, pk, vg, nstream)
+      else
+         call run_phase1(self%at, ap, pk, vg, nstream, 1, 1)
+      end if
       do b = 1, n
          bx(:, b) = self%at(b)%c
          self%br(b) = self%at(b)%sc * pk%kinds(max(1, self%at(b)%k))%r_out
@@ -83,16 +137,24 @@ contains
       self%np_frozen = pk%np
    end subroutine speculate
 
-   !> The parallel loop of phase 1.
-   subroutine run_phase1(at, ap, pk, vg, nstream)
+   !> The parallel loop of phase 1 over members first, first + stride, ... of the batch (the
+   !> others are left as they are).
+   subroutine run_phase1(at, ap, pk, vg, nstream, first, stride)
+      !> Attempts of the batch.
       type(attempt_type), intent(inout) :: at(:)
+      !> Parameters of the sieve.
       type(attempt_params_type), intent(in) :: ap
+      !> Packing (frozen).
       type(packing_type), intent(in) :: pk
+      !> Void grid (void placement).
       type(void_grid_type), intent(in) :: vg
+      !> Particles of the sieve before this batch.
       integer, intent(in) :: nstream
+      !> First member and stride.
+      integer, intent(in) :: first, stride
       integer :: b
-      !$omp parallel do default(none) shared(at, ap, pk, vg, nstream) private(b) schedule(dynamic, 1)
-      do b = 1, size(at)
+      !$omp parallel do default(none) shared(at, ap, pk, vg, nstream, first, stride) private(b) schedule(dynamic, 1)
+      do b = first, size(at), stride
          block
             type(fit_scratch_type) :: scratch
             call at(b)%start(ap, nstream + b)

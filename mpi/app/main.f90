@@ -1,0 +1,75 @@
+!> The `anm` command of the MPI build (mpi/, scripts/build_mpi.sh): `mpirun -np N anm run FILE.nml`
+!> parks on every process (anm_mpi_distributor: phase 1 of each batch spread over the processes
+!> and their threads) and rank 0 writes the model, summary and VRML: the same model as the serial
+!> program. The other commands run on rank 0 alone, as in the serial program. Exit codes as
+!> app/main.f90 (docs/cli.md); an error on any process aborts the job (MPI_Abort).
+program anm_mpi
+   use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
+   use anm_core_error, only: error_type, fatal_error, error_code
+   use anm_core_filesystem, only: string_type
+   use anm_cli_arguments, only: command_arguments
+   use anm_cli_commands, only: write_usage, shape_command, synth_command, verify_command, study_command
+   use anm_cli_run, only: run_job, anm_version
+   use anm_core_output, only: ignore_file_size_signal
+   use anm_mpi_distributor, only: mpi_distributor_type, new_mpi_distributor
+   use mpi_f08, only: MPI_Init_thread, MPI_Finalize, MPI_Abort, MPI_COMM_WORLD, MPI_THREAD_FUNNELED
+   use omp_lib, only: omp_get_max_threads
+   implicit none
+
+   type(string_type), allocatable :: args(:)
+   type(error_type), allocatable :: error
+   type(mpi_distributor_type) :: dist
+   integer :: status, provided
+
+   ! MPI is called outside the OpenMP regions only
+   call MPI_Init_thread(MPI_THREAD_FUNNELED, provided)
+   call ignore_file_size_signal()
+   call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads())
+   args = command_arguments()
+   if (size(args) < 1) then
+      if (dist%writer) call write_usage(error_unit)
+      call finish(2)
+   end if
+   status = 0
+   if (args(1)%s == "run") then
+      if (size(args) /= 2) then
+         call fatal_error(error, "usage: anm run FILE.nml", error_code%value)
+      else
+         call run_job(args(2)%s, output_unit, error_unit, error, omp_get_max_threads(), dist=dist)
+      end if
+   else if (dist%writer) then
+      select case (args(1)%s)
+      case ("-h", "--help", "help")
+         call write_usage(output_unit)
+      case ("--version")
+         write (output_unit, '(a)') "anm "//anm_version//" (MPI)"
+      case ("shape")
+         call shape_command(args(2:), output_unit, error)
+      case ("synth")
+         call synth_command(args(2:), output_unit, error)
+      case ("verify")
+         call verify_command(args(2:), output_unit, status, error)
+      case ("study")
+         call study_command(args(2:), output_unit, error)
+      case default
+         call fatal_error(error, "unknown command '"//args(1)%s//"' (try: anm --help)", error_code%value)
+      end select
+   end if
+   if (allocated(error)) then
+      write (error_unit, '(a)') "anm: error: "//error%message
+      flush (error_unit)
+      ! the other processes may wait in a collective call
+      call MPI_Abort(MPI_COMM_WORLD, 1)
+   end if
+   call finish(status)
+
+contains
+
+   !> End MPI and exit with `code`.
+   subroutine finish(code)
+      integer, intent(in) :: code
+      call MPI_Finalize()
+      if (code /= 0) call exit(code)
+      stop
+   end subroutine finish
+end program anm_mpi
