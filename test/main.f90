@@ -18,6 +18,7 @@ program tester
    use test_audit, only: collect_audit
    use test_cli, only: collect_cli
    use test_api, only: collect_api
+   use test_dense, only: collect_dense
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -31,7 +32,7 @@ program tester
              new_testsuite("shells", collect_shells), &
              new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing), &
              new_testsuite("audit", collect_audit), new_testsuite("cli", collect_cli), &
-             new_testsuite("api", collect_api)]
+             new_testsuite("api", collect_api), new_testsuite("dense", collect_dense)]
    npass = 0
    nfail = 0
    nskip = 0

@@ -4,12 +4,16 @@
 !>
 !> Validates: max_locations, max_orientations, max_sizes, max_shapes, max_failures >= 1;
 !> n_ext, n_box >= 2; contact_method 'eob' or 'newton_raphson' (resolved to `contact_method%...`);
-!> placement 'uniform' or 'void' (resolved to `placement%...`).
+!> placement 'uniform' or 'void' (resolved to `placement%...`); strategy 'rsa' or 'dense' (resolved
+!> to `parking_strategy%...`); dense_rounds, dense_sweeps >= 1; 0 < dense_target_acceptance < 1;
+!> dense_time_limit >= 0. The strategy and the dense variables are dumped only for 'dense' (an
+!> 'rsa' run's resolved text is unchanged).
 !>
 !> Usage:
 !>     call load_parking_config(parking, nml, error)
 !>     if (parking%placement == placement%void) ...
 module anm_config_parking
+   use anm_core_kinds, only: wp
    use anm_core_error, only: error_type
    use anm_core_strings, only: to_string, to_lower
    use anm_contact_overlap, only: contact_method
@@ -19,7 +23,7 @@ module anm_config_parking
    private
 
    public :: parking_config_type, load_parking_config, dump_parking_config, placement, contact_method, &
-      & placement_name, contact_method_name
+      & placement_name, contact_method_name, parking_strategy, strategy_name
 
    !> Placement of candidate centres.
    type :: placement_enum
@@ -31,6 +35,17 @@ module anm_config_parking
 
    !> The placements, used as `placement%void`.
    type(placement_enum), parameter :: placement = placement_enum()
+
+   !> Placement strategies.
+   type :: parking_strategy_enum
+      !> Random sequential addition (the thesis, anm_parking_rsa).
+      integer :: rsa = 1
+      !> RSA with relaxation sweeps of hard-particle Monte Carlo moves (anm_parking_dense).
+      integer :: dense = 2
+   end type parking_strategy_enum
+
+   !> The strategies, used as `parking_strategy%dense`.
+   type(parking_strategy_enum), parameter :: parking_strategy = parking_strategy_enum()
 
    !> The parking.
    type :: parking_config_type
@@ -46,6 +61,14 @@ module anm_config_parking
       logical :: certified = .true.
       !> Placement of candidate centres, one of `placement`.
       integer :: placement = placement%uniform
+      !> Placement strategy, one of `parking_strategy`.
+      integer :: strategy = parking_strategy%rsa
+      !> Dense: relaxation-and-insertion rounds per sieve, sweeps per round.
+      integer :: dense_rounds = 20, dense_sweeps = 10
+      !> Dense: acceptance ratio the move sizes are tuned to.
+      real(wp) :: dense_target_acceptance = 0.3_wp
+      !> Dense: wall-clock limit (s) after which no new round starts (0: none; not deterministic).
+      real(wp) :: dense_time_limit = 0.0_wp
    end type parking_config_type
 
 contains
@@ -60,10 +83,13 @@ contains
       type(error_type), allocatable, intent(out) :: error
       integer :: max_locations, max_orientations, max_sizes, max_shapes, max_failures, n_ext, n_box
       character(len=32) :: contact_method
-      character(len=16) :: placement
+      character(len=16) :: placement, strategy
       logical :: certified
+      integer :: dense_rounds, dense_sweeps
+      real(wp) :: dense_target_acceptance, dense_time_limit
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
-         n_ext, n_box, certified, placement
+         n_ext, n_box, certified, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
+         dense_time_limit
       integer :: ig, stat
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -78,6 +104,11 @@ contains
       n_box = self%n_box
       certified = self%certified
       placement = placement_name(self%placement)
+      strategy = strategy_name(self%strategy)
+      dense_rounds = self%dense_rounds
+      dense_sweeps = self%dense_sweeps
+      dense_target_acceptance = self%dense_target_acceptance
+      dense_time_limit = self%dense_time_limit
       ig = find_group(nml, "parking")
       if (ig > 0) then
          lines = nml%groups(ig)%lines
@@ -94,7 +125,23 @@ contains
       call at_least("max_failures", max_failures, 1)
       call at_least("n_ext", n_ext, 2)
       call at_least("n_box", n_box, 2)
+      call at_least("dense_rounds", dense_rounds, 1)
+      call at_least("dense_sweeps", dense_sweeps, 1)
       if (allocated(error)) return
+      if (.not. (dense_target_acceptance > 0.0_wp .and. dense_target_acceptance < 1.0_wp)) then
+         call config_error(error, nml, ig, "parking", "dense_target_acceptance", "= "//to_string(dense_target_acceptance) &
+                           //" must be in (0, 1)")
+         return
+      end if
+      if (.not. (dense_time_limit >= 0.0_wp)) then
+         call config_error(error, nml, ig, "parking", "dense_time_limit", "= "//to_string(dense_time_limit) &
+                           //" must be >= 0")
+         return
+      end if
+      self%dense_rounds = dense_rounds
+      self%dense_sweeps = dense_sweeps
+      self%dense_target_acceptance = dense_target_acceptance
+      self%dense_time_limit = dense_time_limit
       self%max_locations = max_locations
       self%max_orientations = max_orientations
       self%max_sizes = max_sizes
@@ -121,6 +168,16 @@ contains
       case default
          call config_error(error, nml, ig, "parking", "placement", "= '"//trim(placement) &
                            //"' must be 'uniform' or 'void'")
+         return
+      end select
+      select case (to_lower(trim(strategy)))
+      case ("rsa")
+         self%strategy = strategy_enum_rsa()
+      case ("dense")
+         self%strategy = strategy_enum_dense()
+      case default
+         call config_error(error, nml, ig, "parking", "strategy", "= '"//trim(strategy) &
+                           //"' must be 'rsa' or 'dense'")
          return
       end select
 
@@ -158,6 +215,26 @@ contains
       k = placement%void
    end function placement_enum_void
 
+   pure integer function strategy_enum_rsa() result(k)
+      k = parking_strategy%rsa
+   end function strategy_enum_rsa
+
+   pure integer function strategy_enum_dense() result(k)
+      k = parking_strategy%dense
+   end function strategy_enum_dense
+
+   !> Namelist spelling of a strategy.
+   pure function strategy_name(p) result(s)
+      !> One of `parking_strategy`.
+      integer, intent(in) :: p
+      character(len=:), allocatable :: s
+      if (p == parking_strategy%dense) then
+         s = "dense"
+      else
+         s = "rsa"
+      end if
+   end function strategy_name
+
    !> Namelist spelling of a contact method.
    pure function contact_method_name(method) result(s)
       !> One of `contact_method`.
@@ -192,6 +269,13 @@ contains
              //to_string(self%max_shapes)//", max_failures = "//to_string(self%max_failures) &
              //", contact_method = '"//contact_method_name(self%contact_method)//"', n_ext = " &
              //to_string(self%n_ext)//", n_box = "//to_string(self%n_box)//", certified = " &
-             //logical_text(self%certified)//", placement = '"//placement_name(self%placement)//"' /"//new_line("a")
+             //logical_text(self%certified)//", placement = '"//placement_name(self%placement)//"'"
+      ! an 'rsa' run's resolved text stays as before the strategies existed
+      if (self%strategy /= parking_strategy%rsa) then
+         text = text//", strategy = '"//strategy_name(self%strategy)//"', dense_rounds = "//to_string(self%dense_rounds) &
+                //", dense_sweeps = "//to_string(self%dense_sweeps)//", dense_target_acceptance = " &
+                //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit)
+      end if
+      text = text//" /"//new_line("a")
    end function dump_parking_config
 end module anm_config_parking

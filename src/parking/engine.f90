@@ -5,7 +5,7 @@
 !> particles, their cell list and the overlap test of a candidate pose), anm_parking_attempts (the
 !> per-particle random streams and the thesis' nested attempt order), anm_parking_scheduler (the
 !> parallel batches) and the strategies: anm_parking_rsa (random sequential addition, sieve by
-!> sieve). Only this driver reads `run_config_type`; the pieces take their own parameter records,
+!> sieve) and anm_parking_dense (RSA with relaxation sweeps of hard-particle moves). Only this driver reads `run_config_type`; the pieces take their own parameter records,
 !> filled here.
 !>
 !> Adding a strategy: add an enumerator to `parking_strategy`, a module that parks into the
@@ -19,26 +19,20 @@ module anm_parking_engine
    use anm_shapes_library, only: shape_set_type
    use anm_shapes_source, only: load_shape_source
    use anm_config_job, only: run_config_type, placement, write_config
+   use anm_config_parking, only: parking_strategy
    use anm_shells_thickness, only: thickness_to_mm
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
    use anm_parking_scheduler, only: phase1_distributor_type
+   use anm_parking_dense, only: park_dense, dense_params_type
    use anm_io_model, only: model_type
    use omp_lib, only: omp_get_max_threads
    implicit none
    private
 
    public :: run_parking, particle_kind_type, width_levels, parking_strategy
-
-   type :: parking_strategy_enum
-      !> Random sequential addition (anm_parking_rsa).
-      integer :: rsa = 1
-   end type parking_strategy_enum
-
-   !> Placement strategies.
-   type(parking_strategy_enum), parameter :: parking_strategy = parking_strategy_enum()
 
 contains
 
@@ -69,7 +63,7 @@ contains
       type(sieve_result_type), allocatable :: result(:)
       type(run_state_type) :: run
       integer, allocatable :: first_shape(:), nshape(:)
-      integer :: s, strategy
+      integer :: s
       integer(i8) :: t1
 
       call load_sources(cfg, model, first_shape, nshape, error)
@@ -92,9 +86,11 @@ contains
       call system_clock(run%t0, run%rate)
       run%tlast = run%t0
 
-      strategy = parking_strategy%rsa
-      select case (strategy)
-      case (parking_strategy%rsa)
+      select case (cfg%parking%strategy)
+      case (parking_strategy%dense)
+         call park_dense(pk, ks, ap, rp, dense_params(cfg), cfg%sieves%target_fraction(:cfg%sieves%nsieve), result, &
+                         run, error)
+      case default
          call park_rsa(pk, ks, ap, rp, cfg%sieves%target_fraction(:cfg%sieves%nsieve), result, run, error)
       end select
       if (allocated(error)) return
@@ -232,6 +228,18 @@ contains
       p%nlayer = cfg%shells%nlayer
       if (present(progress_unit)) p%progress_unit = progress_unit
    end function rsa_params
+
+   !> What the dense strategy needs of the configuration.
+   function dense_params(cfg) result(p)
+      type(run_config_type), intent(in) :: cfg
+      type(dense_params_type) :: p
+      p%seed = cfg%run%seed
+      p%rounds = cfg%parking%dense_rounds
+      p%sweeps = cfg%parking%dense_sweeps
+      p%target_acceptance = cfg%parking%dense_target_acceptance
+      p%time_limit = cfg%parking%dense_time_limit
+      p%nthreads = omp_get_max_threads()
+   end function dense_params
 
    !> The model of a packing.
    subroutine fill_model(cfg, pk, result, model)

@@ -239,8 +239,9 @@ contains
 
    !> No overlap of a particle of kind kn at pose (x, rr, sc) with the walls (non-periodic) or any
    !> parked particle, as the shell mode says. With `since` (> 0), only the particles added or
-   !> moved after that mark are tested, and the walls are not.
-   logical function fits(self, kn, x, rr, sc, scratch, since) result(ok)
+   !> moved after that mark are tested, and the walls are not. With `exclude` (a parked particle's
+   !> id: the trial pose of a move), that particle itself is skipped (its periodic images are not).
+   logical function fits(self, kn, x, rr, sc, scratch, since, exclude) result(ok)
       !> Packing.
       class(packing_type), intent(in) :: self
       !> Kind (built).
@@ -251,13 +252,17 @@ contains
       type(fit_scratch_type), intent(inout) :: scratch
       !> Mark (`mark()`) after which particles are tested (default 0: all).
       integer, intent(in), optional :: since
-      integer :: i, j, ncand, ii, jmin
+      !> Particle to skip (default: none).
+      integer, intent(in), optional :: exclude
+      integer :: i, j, ncand, ii, jmin, jskip
       real(wp) :: xj(3)
       logical :: hit
       integer, allocatable :: order(:)
       ok = .false.
       jmin = 0
       if (present(since)) jmin = since
+      jskip = 0
+      if (present(exclude)) jskip = exclude
       associate (p => self%p, kq => self%kinds(kn))
          if (.not. p%periodic .and. jmin == 0) then
             if (p%nlayer > 0 .and. p%mode == shell_mode%exclude) then
@@ -266,12 +271,12 @@ contains
                if (body_crosses_walls(kq%body, x, rr, sc, p%box)) return
             end if
          end if
-         if (self%ndead == 0) then
+         if (self%ndead == 0 .and. jskip == 0) then
             call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, rin=sc * kq%r_in_query, &
                                     jmin=jmin)
             if (hit) return
          else
-            ! a certain overlap may be a retired record: no shortcut
+            ! a certain overlap may be a retired record or the excluded particle: no shortcut
             call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, jmin=jmin)
          end if
          call live_candidates(self, scratch%cand, scratch%shift, ncand)
@@ -279,6 +284,9 @@ contains
          do ii = 1, ncand
             i = order(ii)
             j = scratch%cand(i)
+            if (j == jskip) then
+               if (all(scratch%shift(:, i) == 0.0_wp)) cycle
+            end if
             xj = self%center(:, j) + scratch%shift(:, i)
             associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
                if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then

@@ -105,7 +105,7 @@ contains
       allocate (result(size(ap)))
       carry = 0.0_wp
       do s = 1, size(ap)
-         st = sieve_state_type(sieve=s, target_fraction=target_fraction(s))
+         st = sieve_state_type(sieve=ap(s)%sieve, target_fraction=target_fraction(s))
          st%target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
          call park_sieve(pk, ks, ap(s), rp, st, run, error)
          if (allocated(error)) return

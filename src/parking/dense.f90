@@ -1,0 +1,322 @@
+!> The dense strategy (`&parking strategy = 'dense'`, docs/dense.md): sieve by sieve, largest
+!> first, random sequential addition as anm_parking_rsa does it; when RSA ends a sieve short of its
+!> target, rounds of relaxation sweeps (hard-particle Monte Carlo moves of the parked particles)
+!> and further RSA insertions follow until the target is reached, `rounds` rounds are spent or the
+!> wall-clock limit passes.
+!>
+!> A move is a translation (probability 1/2: centre + d v, v uniform in the unit ball) or a
+!> rotation (angle uniform in [-a, a] about a uniform axis) of one parked particle, accepted only
+!> when `fits` finds no overlap with any other particle (the shell mode's bodies) and no wall
+!> crossing: no overlap ever exists. The sizes d and a are per sieve, tuned after every sweep
+!> towards the target acceptance (HOOMD-blue's scale solver: x (acc + 1) / (target + 1), within
+!> x/2 .. 2x) from integer counts.
+!>
+!> Determinism: sweep k moves particles 1..np in id order (ids are stable: the strategy only adds);
+!> the trial of particle i in sweep k draws from its own stream (seed xor salt, k 2^32 + i).
+!> Trials are evaluated in batches in parallel against the frozen packing, then committed in id
+!> order; a trial whose bounding sphere meets the old or new bounding sphere of a move committed
+!> earlier in the batch is re-evaluated against the current packing. The sweep thus equals the
+!> serial sweep, for any batch size and thread count. Each RSA round draws its particles from the
+!> sieve's streams under a seed derived from (seed, round).
+!>
+!> Usage:
+!>     call park_dense(pk, ks, ap, rp, dp, target_fraction, result, run, error)
+!>     call new_move_state(ms, max_width);  call relax_sweep(pk, ms, dp)   ! one sweep
+module anm_parking_dense
+   use anm_core_kinds, only: wp, i8
+   use anm_core_error, only: error_type
+   use anm_core_random, only: rng_type, new_rng, splitmix64
+   use anm_geometry_rotation, only: rotation_about_axis
+   use anm_parking_kinds, only: kind_set_type
+   use anm_parking_packing, only: packing_type, fit_scratch_type
+   use anm_parking_attempts, only: attempt_params_type
+   use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
+   use omp_lib, only: omp_get_thread_num, omp_get_max_threads
+   implicit none
+   private
+
+   public :: park_dense, dense_params_type, move_state_type, new_move_state, relax_sweep
+
+   !> Salt of the move streams (kept apart from the RSA streams (seed, sieve 2^32 + i)).
+   integer(i8), parameter :: move_salt = 6148914691236517205_i8
+   !> Largest rotation step (rad) and translation step (fraction of the sieve's largest width).
+   real(wp), parameter :: max_angle = 1.0_wp, max_step = 0.25_wp
+
+   !> What the strategy needs of the run besides the RSA parameters.
+   type :: dense_params_type
+      !> Base seed.
+      integer(i8) :: seed = 1_i8
+      !> Relaxation-and-insertion rounds per sieve; sweeps per round.
+      integer :: rounds = 20, sweeps = 10
+      !> Acceptance ratio the move sizes are tuned to.
+      real(wp) :: target_acceptance = 0.3_wp
+      !> Wall-clock limit (s) after which no round starts (0: none).
+      real(wp) :: time_limit = 0.0_wp
+      !> Threads; trials per batch (0: 8 per thread; any value gives the same model).
+      integer :: nthreads = 1, batch = 0
+   end type dense_params_type
+
+   !> Move sizes per sieve and the counters of the last sweep.
+   type :: move_state_type
+      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step.
+      real(wp), allocatable :: d(:), a(:), dmax(:)
+      !> Trials and acceptances of the last sweep per sieve: translations, rotations.
+      integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:)
+      !> Sweeps done (keys the streams).
+      integer :: sweep = 0
+   end type move_state_type
+
+contains
+
+   !> Move sizes for sieves of the given largest widths (mm): steps of 5 % of the width, 0.2 rad.
+   pure subroutine new_move_state(ms, max_width)
+      !> Move state.
+      type(move_state_type), intent(out) :: ms
+      !> Largest width of each sieve (mm).
+      real(wp), intent(in) :: max_width(:)
+      integer :: n
+      n = size(max_width)
+      ms%d = 0.05_wp * max_width
+      ms%dmax = max_step * max_width
+      allocate (ms%a(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n))
+      ms%a = 0.2_wp
+      ms%nt = 0
+      ms%at = 0
+      ms%nr = 0
+      ms%ar = 0
+   end subroutine new_move_state
+
+   !> Park every sieve (ap(s), target_fraction(s)) into pk.
+   subroutine park_dense(pk, ks, ap, rp, dp, target_fraction, result, run, error)
+      !> Packing.
+      type(packing_type), intent(inout) :: pk
+      !> Kinds bookkeeping.
+      type(kind_set_type), intent(inout) :: ks
+      !> Attempt parameters of each sieve.
+      type(attempt_params_type), intent(in) :: ap(:)
+      !> RSA parameters.
+      type(rsa_params_type), intent(in) :: rp
+      !> Dense parameters.
+      type(dense_params_type), intent(in) :: dp
+      !> Target volume fraction of each sieve.
+      real(wp), intent(in) :: target_fraction(:)
+      !> What each sieve achieved.
+      type(sieve_result_type), allocatable, intent(out) :: result(:)
+      !> Run state.
+      type(run_state_type), intent(inout) :: run
+      !> Error (a kind that cannot be built).
+      type(error_type), allocatable, intent(out) :: error
+      type(move_state_type) :: ms
+      type(sieve_result_type), allocatable :: r1(:)
+      type(sieve_result_type) :: res
+      type(attempt_params_type) :: a2
+      real(wp) :: carry, target
+      integer :: s, round, j
+      integer(i8) :: t1, h, hh
+      allocate (result(size(ap)))
+      call new_move_state(ms, ap(:)%max_width)
+      carry = 0.0_wp
+      do s = 1, size(ap)
+         target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
+         call park_rsa(pk, ks, ap(s:s), rp, [target / rp%vbox], r1, run, error)
+         if (allocated(error)) return
+         res = r1(1)
+         round = 0
+         do while (.not. res%reached .and. res%vol < target .and. round < dp%rounds)
+            if (dp%time_limit > 0.0_wp) then
+               call system_clock(t1)
+               if (real(t1 - run%t0, wp) / run%rate > dp%time_limit) exit
+            end if
+            round = round + 1
+            do j = 1, dp%sweeps
+               call relax_sweep(pk, ms, dp)
+            end do
+            a2 = ap(s)
+            h = int(s, i8) * 65536_i8 + round
+            call splitmix64(h, hh)
+            a2%seed = ieor(ap(s)%seed, hh)
+            call park_rsa(pk, ks, [a2], rp, [(target - res%vol) / rp%vbox], r1, run, error)
+            if (allocated(error)) return
+            res%vol = res%vol + r1(1)%vol
+            res%count = res%count + r1(1)%count
+            res%shell_fraction = res%shell_fraction + r1(1)%shell_fraction
+            res%reached = r1(1)%reached .or. res%vol >= target
+            call round_line(rp, ms, s, round, res, target)
+         end do
+         result(s) = res
+         carry = merge(target - res%vol, 0.0_wp, res%reached)
+      end do
+   end subroutine park_dense
+
+   !> One relaxation sweep: one trial move per particle, particles in id order; move sizes tuned
+   !> afterwards; the cell list compacted.
+   subroutine relax_sweep(pk, ms, dp)
+      !> Packing.
+      type(packing_type), intent(inout) :: pk
+      !> Move sizes and counters.
+      type(move_state_type), intent(inout) :: ms
+      !> Parameters (seed, threads, batch, target acceptance).
+      type(dense_params_type), intent(in) :: dp
+      type(fit_scratch_type), allocatable :: scr(:)
+      real(wp), allocatable :: xn(:, :), rn(:, :, :), cx(:, :), cr(:)
+      logical, allocatable :: ok(:), inside(:)
+      integer, allocatable :: typ(:)
+      integer :: nb, i0, n, b, i, t, nc, s, np
+      integer(i8) :: k
+      ms%sweep = ms%sweep + 1
+      k = ms%sweep
+      ms%nt = 0
+      ms%at = 0
+      ms%nr = 0
+      ms%ar = 0
+      np = pk%np
+      nb = dp%batch
+      if (nb <= 0) nb = 8 * max(1, dp%nthreads)
+      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), ok(nb), inside(nb), typ(nb))
+      ! committed moves of the batch: old and new centres, bounding radius
+      allocate (cx(3, 2 * nb), cr(2 * nb))
+      i0 = 0
+      do while (i0 < np)
+         n = min(nb, np - i0)
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, ok, inside, typ, n, i0, k, scr) private(b, i, t) &
+         !$omp schedule(dynamic, 1)
+         do b = 1, n
+            i = i0 + b
+            call propose(pk, ms, dp%seed, k, i, xn(:, b), rn(:, :, b), typ(b), inside(b))
+            ok(b) = .false.
+            if (inside(b)) then
+               t = omp_get_thread_num()
+               ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), pk%scale(i), scr(t), exclude=i)
+            end if
+         end do
+         !$omp end parallel do
+         nc = 0
+         do b = 1, n
+            i = i0 + b
+            s = pk%sieve(i)
+            if (inside(b)) then
+               if (conflicts(pk, xn(:, b), pk%rho(i), cx, cr, nc)) then
+                  ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), pk%scale(i), scr(0), exclude=i)
+               end if
+            end if
+            if (typ(b) == 1) then
+               ms%nt(s) = ms%nt(s) + 1
+               if (ok(b)) ms%at(s) = ms%at(s) + 1
+            else
+               ms%nr(s) = ms%nr(s) + 1
+               if (ok(b)) ms%ar(s) = ms%ar(s) + 1
+            end if
+            if (ok(b)) then
+               cx(:, nc + 1) = pk%center(:, i)
+               cx(:, nc + 2) = xn(:, b)
+               cr(nc + 1:nc + 2) = pk%rho(i)
+               nc = nc + 2
+               call pk%move(i, xn(:, b), rn(:, :, b))
+            end if
+         end do
+         i0 = i0 + n
+      end do
+      call tune(ms, dp%target_acceptance)
+      call pk%compact()
+   end subroutine relax_sweep
+
+   !> The trial of particle i in sweep k: new centre x and rotation r; typ 1 translation, 2
+   !> rotation; inside false when a walled box's centre would leave the box.
+   subroutine propose(pk, ms, seed, k, i, x, r, typ, inside)
+      type(packing_type), intent(in) :: pk
+      type(move_state_type), intent(in) :: ms
+      integer(i8), intent(in) :: seed, k
+      integer, intent(in) :: i
+      real(wp), intent(out) :: x(3), r(3, 3)
+      integer, intent(out) :: typ
+      logical, intent(out) :: inside
+      type(rng_type) :: rng
+      real(wp) :: v(3), axis(3)
+      integer :: s, d
+      s = pk%sieve(i)
+      call new_rng(rng, ieor(seed, move_salt), k * 4294967296_i8 + i)
+      x = pk%center(:, i)
+      r = pk%rot(:, :, i)
+      inside = .true.
+      if (rng%uniform() < 0.5_wp) then
+         typ = 1
+         do
+            do d = 1, 3
+               v(d) = 2.0_wp * rng%uniform() - 1.0_wp
+            end do
+            if (sum(v**2) <= 1.0_wp) exit
+         end do
+         x = x + ms%d(s) * v
+         if (pk%p%periodic) then
+            x = modulo(x, pk%p%box)
+            ! modulo of a tiny negative value may round to the box edge
+            where (x >= pk%p%box) x = 0.0_wp
+         else
+            inside = all(x > 0.0_wp .and. x < pk%p%box)
+         end if
+      else
+         typ = 2
+         do
+            do d = 1, 3
+               axis(d) = rng%normal()
+            end do
+            if (sum(axis**2) > 1.0e-12_wp) exit
+         end do
+         r = matmul(rotation_about_axis(axis, ms%a(s) * (2.0_wp * rng%uniform() - 1.0_wp)), r)
+      end if
+   end subroutine propose
+
+   !> Whether the bounding sphere (x, rho) meets one of the nc committed spheres (nearest image;
+   !> conservatively true when the spheres span half the box).
+   pure logical function conflicts(pk, x, rho, cx, cr, nc) result(hit)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: x(3), rho, cx(:, :), cr(:)
+      integer, intent(in) :: nc
+      real(wp) :: e(3)
+      integer :: m
+      hit = .true.
+      do m = 1, nc
+         if (pk%p%periodic .and. 2.0_wp * (rho + cr(m)) >= minval(pk%p%box)) return
+         e = x - cx(:, m)
+         if (pk%p%periodic) e = e - pk%p%box * anint(e / pk%p%box)
+         if (sum(e**2) < (rho + cr(m))**2) return
+      end do
+      hit = .false.
+   end function conflicts
+
+   !> Tune the move sizes of every sieve moved in the last sweep towards the target acceptance.
+   pure subroutine tune(ms, target)
+      type(move_state_type), intent(inout) :: ms
+      real(wp), intent(in) :: target
+      integer :: s
+      real(wp) :: acc
+      do s = 1, size(ms%d)
+         if (ms%nt(s) > 0) then
+            acc = real(ms%at(s), wp) / real(ms%nt(s), wp)
+            ms%d(s) = min(ms%dmax(s), max(0.5_wp * ms%d(s), min(2.0_wp * ms%d(s), ms%d(s) * (acc + 1.0_wp) &
+                                                                 / (target + 1.0_wp))))
+         end if
+         if (ms%nr(s) > 0) then
+            acc = real(ms%ar(s), wp) / real(ms%nr(s), wp)
+            ms%a(s) = min(max_angle, max(0.5_wp * ms%a(s), min(2.0_wp * ms%a(s), ms%a(s) * (acc + 1.0_wp) &
+                                                               / (target + 1.0_wp))))
+         end if
+      end do
+   end subroutine tune
+
+   !> The line closing a round.
+   subroutine round_line(rp, ms, s, round, res, target)
+      type(rsa_params_type), intent(in) :: rp
+      type(move_state_type), intent(in) :: ms
+      integer, intent(in) :: s, round
+      type(sieve_result_type), intent(in) :: res
+      real(wp), intent(in) :: target
+      real(wp) :: acc
+      if (rp%progress_unit < 0) return
+      acc = real(ms%at(s) + ms%ar(s), wp) / max(1.0_wp, real(ms%nt(s) + ms%nr(s), wp))
+      write (rp%progress_unit, '(a,i0,a,i0,a,i0,a,f8.5,a,f8.5,a,f5.3,a,es9.2,a,f6.3,a)') "sieve ", s, ": dense round ", &
+         round, ", ", res%count, " particles, fraction ", res%vol / rp%vbox, " of ", target / rp%vbox, &
+         ", acceptance ", acc, ", step ", ms%d(s), " mm, ", ms%a(s), " rad"
+      flush (rp%progress_unit)
+   end subroutine round_line
+end module anm_parking_dense
