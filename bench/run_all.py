@@ -194,7 +194,7 @@ def park(anm: str, nml: Path, tmp: Path, name: str, threads: int, edits: dict[st
         text = text.replace(old, new)
     copy = tmp / f"{name}.nml"
     copy.write_text(text)
-    r = sh(f"{shlex.quote(anm)} run {shlex.quote(str(copy))}", env={"OMP_NUM_THREADS": str(threads)})
+    r = sh(f"{shlex.quote(anm)} run --force {shlex.quote(str(copy))}", env={"OMP_NUM_THREADS": str(threads)})
     job = Job(r)
     job.sieves, total = parse_summary(r.stdout)
     if total:

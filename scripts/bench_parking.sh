@@ -35,7 +35,7 @@ timed() {   # label command... : one line "label: wall, user, peak" (GNU time)
 run() {   # name threads namelist [sed expressions...]
     local name="$1" threads="$2" nml="$3"; shift 3
     sed -e "s|directory = '[^']*'|directory = '$tmp/$name'|" "$@" "$nml" > "$tmp/$name.nml"
-    timed "$name threads=$threads" env OMP_NUM_THREADS="$threads" "$anm" run "$tmp/$name.nml" \
+    timed "$name threads=$threads" env OMP_NUM_THREADS="$threads" "$anm" run --force "$tmp/$name.nml" \
         > "$tmp/$name.out" 2> "$tmp/$name.err" || { tail -3 "$tmp/$name.err"; return; }
     grep -E "done:" "$tmp/$name.err" | tail -1
     tail -1 "$tmp/$name.err"
@@ -71,7 +71,7 @@ NML
     fi
     for round in $(seq "${RSA_ROUNDS:-3}"); do
         for t in 1 2; do
-            timed "rsa200k round $round threads=$t" env OMP_NUM_THREADS=$t "$anm" run "$tmp/rsa.nml" \
+            timed "rsa200k round $round threads=$t" env OMP_NUM_THREADS=$t "$anm" run --force "$tmp/rsa.nml" \
                 > /dev/null 2> "$tmp/rsa.err"
             tail -1 "$tmp/rsa.err"
             if [ -n "$ref" ]; then

@@ -9,7 +9,7 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 bash "$here/scripts/setup.sh"
 anm="$(bash "$here/scripts/build.sh")"
-"$anm" run inputs/default.nml
+"$anm" run --force inputs/default.nml
 "$anm" verify out/default.h5
 python3 -m anm_post slice out/default.h5 --axis z --position 10 --pixel 0.05 --shells 0.02 \
     --png out/default-slice.png --labels out/default-slice.npz

@@ -11,7 +11,7 @@ echo "max_locations,attempts,spheres,fraction"
 for n in 10 100 1000 10000 100000 1000000; do
     sed -e "s/max_locations = [0-9]*/max_locations = $n/" -e "s|directory = 'out/rsa'|directory = '$tmp'|" \
         inputs/rsa_spheres.nml > "$tmp/rsa.nml"
-    "$anm" run "$tmp/rsa.nml" > /dev/null 2>&1
+    "$anm" run --force "$tmp/rsa.nml" > /dev/null 2>&1
     python3 - "$tmp/model.h5" "$n" <<'PY'
 import sys, h5py
 f = h5py.File(sys.argv[1])

@@ -17,7 +17,7 @@ for n in 30 60 90 120 140 285 450 975 1500; do
    mkdir -p "$dir"
    sed -e "s|max_locations = [0-9]*|max_locations = $n|" -e "s|directory = '[^']*'|directory = '$dir'|" \
       inputs/table2_3.nml > "$dir/run.nml"
-   /usr/bin/time -f "locations $n: %e s" "$anm" run "$dir/run.nml" > "$dir/run.log" 2>&1
+   /usr/bin/time -f "locations $n: %e s" "$anm" run --force "$dir/run.nml" > "$dir/run.log" 2>&1
    runs+=("$n=$dir/model-summary.csv")
 done
 anm_post sweep "${runs[@]}" --label "random locations" --markdown "$out/table2_3.md" --png "$out/table2_3.png"

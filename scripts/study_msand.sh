@@ -20,7 +20,7 @@ for case in model:msand model-spheres:msand_spheres; do
    name=${case%%:*}
    nml=${case##*:}
    if [[ "${1:-}" == "--rerun" || ! -f out/msand/$name.h5 ]]; then
-      /usr/bin/time -f "$nml: %e s" "$anm" run "inputs/$nml.nml"
+      /usr/bin/time -f "$nml: %e s" "$anm" run --force "inputs/$nml.nml"
    fi
    "${anm_post[@]}" table "out/msand/$name.h5" --format markdown > "$out/$nml-psd.md"
    /usr/bin/time -f "$nml convergence: %e s" "${anm_post[@]}" convergence "out/msand/$name.h5" --densities "$dens" \

@@ -22,7 +22,7 @@ for t in 0 0.002 0.004 0.006 0.008 0.010 0.012 0.014 0.016 0.018 0.020; do
    fi
    sed -e "s|^&shells.*|$shells|" -e "s|directory = 'out/table2_1'|directory = '$dir'|" \
       -e "s|, name = 'model' /|, name = 'model', vrml = .false. /|" inputs/table2_1.nml > "$dir/run.nml"
-   /usr/bin/time -f "shell $t: %e s" "$anm" run "$dir/run.nml" > "$dir/run.log" 2>&1
+   /usr/bin/time -f "shell $t: %e s" "$anm" run --force "$dir/run.nml" > "$dir/run.log" 2>&1
    runs+=("$t=$dir/model-summary.csv")
 done
 anm_post sweep "${runs[@]}" --label "shell thickness (% of L)" --scale 100 --shells \

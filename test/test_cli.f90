@@ -3,12 +3,13 @@
 !> (docs/cli.md): the shape table of a sphere, unknown options, missing files.
 module test_cli
    use anm_core_kinds, only: wp, pi
-   use anm_core_error, only: error_type
+   use anm_core_error, only: error_type, error_code
    use anm_core_filesystem, only: string_type
    use anm_shapes_analytic, only: sphere_shape
    use anm_shapes_nist, only: write_nist_shape
-   use anm_cli_arguments, only: int_option, real_option
-   use anm_cli_commands, only: shape_command, verify_command
+   use anm_cli_arguments, only: int_option, real_option, wants_help
+   use anm_cli_commands, only: shape_command, verify_command, write_command_usage, command_names
+   use anm_cli_run, only: output_files, run_command
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -24,7 +25,10 @@ contains
               new_unittest("bad option values are named with the offending text", test_bad_values), &
               new_unittest("anm shape: the table of a sphere file (exact volume)", test_shape_sphere), &
               new_unittest("anm shape: unknown option and missing path", test_shape_bad), &
-              new_unittest("anm verify: a missing model file is named", test_verify_missing)]
+              new_unittest("anm verify: a missing model file is named", test_verify_missing), &
+              new_unittest("every command has a usage text; -h and --help are found", test_help), &
+              new_unittest("usage errors carry error_code%usage, file errors do not", test_usage_class), &
+              new_unittest("the outputs a run checks before overwriting", test_output_files)]
    end subroutine collect_cli
 
    !> An argument list from blank-separated words.
@@ -90,6 +94,66 @@ contains
    end subroutine test_bad_values
 
    !> Fail unless `got` is an error whose message contains `text`.
+   subroutine test_help(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer :: k, unit
+      logical :: found
+      character(len=256) :: line
+      open (newunit=unit, status="scratch", action="readwrite")
+      do k = 1, size(command_names)
+         call write_command_usage(unit, trim(command_names(k)), found)
+         call check(error, found, "no usage text for "//trim(command_names(k)))
+         if (allocated(error)) return
+      end do
+      call write_command_usage(unit, "frobnicate", found)
+      call check(error, .not. found, "usage text for an unknown command")
+      if (allocated(error)) return
+      rewind (unit)
+      read (unit, '(a)') line
+      close (unit)
+      call check(error, index(line, "run FILE.nml") > 0, "first usage line: "//trim(line))
+      if (allocated(error)) return
+      call check(error, wants_help(words("a.h5 --help")) .and. wants_help(words("-h")) &
+                 .and. .not. wants_help(words("a.h5 --force")), "wants_help")
+   end subroutine test_help
+
+   subroutine test_usage_class(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(error_type), allocatable :: got
+      integer :: status
+      call verify_command(words("m.h5 --bogus"), 6, status, got)
+      call check(error, got%stat, error_code%usage, "unknown option")
+      if (allocated(error)) return
+      deallocate (got)
+      call verify_command(words("m.h5 --resolution x"), 6, status, got)
+      call check(error, got%stat, error_code%usage, "bad option value")
+      if (allocated(error)) return
+      deallocate (got)
+      call run_command(words("a.nml b.nml"), 6, 0, got)
+      call check(error, got%stat, error_code%usage, "two namelists")
+      if (allocated(error)) return
+      deallocate (got)
+      call verify_command(words("build/test-tmp/no-such-model.h5"), 6, status, got)
+      call check(error, got%stat /= error_code%usage, "a missing file is not a usage error")
+   end subroutine test_usage_class
+
+   subroutine test_output_files(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(string_type), allocatable :: f(:)
+      f = output_files("o/m", .true., .false., 2)
+      call check(error, size(f), 3, "model, summary, VRML")
+      if (allocated(error)) return
+      call check(error, f(1)%s == "o/m.h5" .and. f(2)%s == "o/m-summary.csv" .and. f(3)%s == "o/m.wrl", "names")
+      if (allocated(error)) return
+      f = output_files("o/m", .true., .true., 2)
+      call check(error, size(f), 5, "per layer")
+      if (allocated(error)) return
+      call check(error, f(3)%s == "o/m-particles.wrl" .and. f(5)%s == "o/m-layer2.wrl", "per-layer names")
+      if (allocated(error)) return
+      f = output_files("o/m", .false., .false., 0)
+      call check(error, size(f), 2, "without VRML")
+   end subroutine test_output_files
+
    subroutine expect(error, got, text)
       type(error_type), allocatable, intent(out) :: error
       type(error_type), allocatable, intent(in) :: got

@@ -377,6 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="anm-post",
         description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"anm-post {__version__}",
+                        help="print the version (that of the anm program, fpm.toml) and exit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep}")
 
     p = sub.add_parser("table", help="PSD table of a model file, or a geometry table of `anm shape`",

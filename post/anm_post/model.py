@@ -162,6 +162,8 @@ def read_model(path: str | Path) -> Model:
         except (KeyError, ValueError, TypeError, OSError) as exc:
             raise AnmPostError(f"{path}::/{name}: malformed ({exc})") from None
     attrs["format_version"] = version
+    if "attempts" in attrs:   # int64 since the self-describing attributes; float64 before
+        attrs["attempts"] = int(np.asarray(attrs["attempts"]).reshape(-1)[0])
     model = Model(path=path, box=box, periodic=periodic, shape_coeffs=coeffs, shape_nmax=snmax, shape_names=names,
                   shape=shape, center=center, rotation=rotation, scale=scale, nmax=nmax, sieve=sieve,
                   shell_thickness=shells, sieves=sieves, attrs=attrs, shells=spec)

@@ -270,30 +270,35 @@ def test_no_arguments_prints_usage(anm_bin):
     assert res.returncode == 2 and "usage: anm" in res.err
 
 
+# (arguments, exit code: 2 for a usage error, 1 for a bad file; phrases of the message)
 CLI = [
-    (["frobnicate"], ["unknown command 'frobnicate'"]),
-    (["verify"], ["missing MODEL.h5"]),
-    (["verify", "x.h5", "--resolution"], ["--resolution needs a value"]),
-    (["verify", "x.h5", "--resolution", "abc"], ["'abc' is not an integer"]),
-    (["verify", "x.h5", "--resolution", "2"], ["must be >= 4"]),
-    (["verify", "x.h5", "--resolution", "99999999999"], ["not an integer"]),
-    (["verify", "x.h5", "--tolerance", "1e"], ["--tolerance"]),
-    (["verify", "x.h5", "--bogus"], ["unknown option '--bogus'"]),
-    (["shape"], ["missing FILE or DIR"]),
-    (["shape", "a.dat", "b.dat"], ["more than one path"]),
-    (["shape", "a.dat", "--order", "-1"], ["must be >= 0"]),
-    (["shape", "/nonexistent/shape.dat"], ["no such shape file or folder"]),
-    (["synth"], ["missing output DIR"]),
-    (["synth", "d", "--count", "0"], ["must be >= 1"]),
-    (["run"], ["usage: anm run FILE.nml"]),
-    (["run", "/nonexistent.nml"], ["/nonexistent.nml"]),
-    (["study", "next"], ["usage: anm study"]),
+    (["frobnicate"], 2, ["unknown command 'frobnicate'"]),
+    (["verify"], 2, ["missing MODEL.h5"]),
+    (["verify", "x.h5", "--resolution"], 2, ["--resolution needs a value"]),
+    (["verify", "x.h5", "--resolution", "abc"], 2, ["'abc' is not an integer"]),
+    (["verify", "x.h5", "--resolution", "2"], 2, ["must be >= 4"]),
+    (["verify", "x.h5", "--resolution", "99999999999"], 2, ["not an integer"]),
+    (["verify", "x.h5", "--tolerance", "1e"], 2, ["--tolerance"]),
+    (["verify", "x.h5", "--bogus"], 2, ["unknown option '--bogus'", "anm verify --help"]),
+    (["shape"], 2, ["missing FILE or DIR"]),
+    (["shape", "a.dat", "b.dat"], 2, ["more than one path"]),
+    (["shape", "a.dat", "--order", "-1"], 2, ["must be >= 0"]),
+    (["shape", "/nonexistent/shape.dat"], 1, ["no such shape file or folder"]),
+    (["synth"], 2, ["missing output DIR"]),
+    (["synth", "d", "--count", "0"], 2, ["must be >= 1"]),
+    (["run"], 2, ["usage: anm run FILE.nml"]),
+    (["run", "a.nml", "--bogus"], 2, ["unknown option '--bogus'"]),
+    (["run", "/nonexistent.nml"], 1, ["/nonexistent.nml"]),
+    (["rerun"], 2, ["usage: anm rerun MODEL.h5"]),
+    (["rerun", "m.h5", "--output"], 2, ["--output needs a value"]),
+    (["rerun", "/nonexistent.h5"], 1, ["/nonexistent.h5"]),
+    (["study", "next"], 2, ["usage: anm study"]),
 ]
 
 
-@pytest.mark.parametrize("args,phrases", CLI, ids=[" ".join(c[0]) or "none" for c in CLI])
-def test_bad_command_line(anm_bin, tmp_path, args, phrases):
-    assert_clean_error(run(anm_bin, *args, cwd=tmp_path), 1, *phrases)
+@pytest.mark.parametrize("args,code,phrases", CLI, ids=[" ".join(c[0]) or "none" for c in CLI])
+def test_bad_command_line(anm_bin, tmp_path, args, code, phrases):
+    assert_clean_error(run(anm_bin, *args, cwd=tmp_path), code, *phrases)
 
 
 def test_verify_resolution_beyond_memory(anm_bin, tmp_path):

@@ -60,7 +60,7 @@ def start(anm_bin, workdir, out, seed, tess=12, limit=None):
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    return subprocess.Popen([anm_bin, "run", str(nml)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    return subprocess.Popen([anm_bin, "run", "--force", str(nml)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             preexec_fn=preexec, env=env)
 
 

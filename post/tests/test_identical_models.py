@@ -27,6 +27,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 DIGESTS = pathlib.Path(__file__).parent / "data" / "identical_models.json"
 # groups that hold the model itself; /run (times, threads, version, the namelist text) may vary
 GROUPS = ("box", "shapes", "particles", "sieves")
+# the documentation attributes of every object (docs/model-file.md) describe the file, not the model
+SELF_DESCRIPTION = ("units", "description")
 JOBS = {
     "default": ("default.nml", False),
     "msand": ("msand.nml", True),
@@ -47,6 +49,8 @@ def model_digest(path):
                 h.update(data.tobytes() if data.dtype.kind != "O" else repr(data.tolist()).encode())
                 out[obj.name] = h.hexdigest()
             for key, value in obj.attrs.items():
+                if key in SELF_DESCRIPTION:
+                    continue
                 out[f"{obj.name}@{key}"] = hashlib.sha256(repr(np.asarray(value).tolist()).encode()).hexdigest()
         for g in GROUPS:
             if g in f:

@@ -12,7 +12,7 @@ module anm_cli_arguments
    implicit none
    private
 
-   public :: command_arguments, option_text, int_option, real_option, is_option
+   public :: command_arguments, option_text, int_option, real_option, is_option, wants_help
 
 contains
 
@@ -36,6 +36,18 @@ contains
       yes = arg(1:min(1, len(arg))) == "-"
    end function is_option
 
+   !> Whether `-h` or `--help` is among the arguments (then the command prints its usage).
+   pure function wants_help(args) result(yes)
+      !> Arguments after the command name.
+      type(string_type), intent(in) :: args(:)
+      logical :: yes
+      integer :: i
+      yes = .false.
+      do i = 1, size(args)
+         if (args(i)%s == "-h" .or. args(i)%s == "--help") yes = .true.
+      end do
+   end function wants_help
+
    !> Text of the value of option `name` (args(i+1)), checked against the allowed characters;
    !> advances i past the value.
    pure subroutine option_text(args, i, name, allowed, what, text, error)
@@ -50,12 +62,12 @@ contains
       !> Error naming the option and the text.
       type(error_type), allocatable, intent(out) :: error
       if (i + 1 > size(args)) then
-         call fatal_error(error, "option "//name//" needs a value", error_code%value)
+         call fatal_error(error, "option "//name//" needs a value", error_code%usage)
          return
       end if
       text = args(i + 1)%s
       if (len(text) == 0 .or. verify(text, allowed) /= 0) then
-         call fatal_error(error, "option "//name//": '"//text//"' is not "//what, error_code%value)
+         call fatal_error(error, "option "//name//": '"//text//"' is not "//what, error_code%usage)
          return
       end if
       i = i + 1
@@ -81,10 +93,10 @@ contains
       if (allocated(error)) return
       read (text, *, iostat=stat) val
       if (stat /= 0) then
-         call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%value)
+         call fatal_error(error, "option "//name//": '"//text//"' is not an integer", error_code%usage)
       else if (present(minimum)) then
          if (val < minimum) call fatal_error(error, "option "//name//": "//to_string(val)//" must be >= " &
-                                             //to_string(minimum), error_code%value)
+                                             //to_string(minimum), error_code%usage)
       end if
    end subroutine int_option
 
@@ -105,6 +117,6 @@ contains
       call option_text(args, i, name, "+-.0123456789eEdD", "a number", text, error)
       if (allocated(error)) return
       read (text, *, iostat=stat) val
-      if (stat /= 0) call fatal_error(error, "option "//name//": '"//text//"' is not a number", error_code%value)
+      if (stat /= 0) call fatal_error(error, "option "//name//": '"//text//"' is not a number", error_code%usage)
    end subroutine real_option
 end module anm_cli_arguments

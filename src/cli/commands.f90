@@ -24,44 +24,84 @@ module anm_cli_commands
    implicit none
    private
 
-   public :: write_usage, shape_command, synth_command, verify_command, study_command, verify_failed
+   public :: write_usage, write_command_usage, command_names, shape_command, synth_command, verify_command, &
+      & study_command, verify_failed
 
    !> Exit status of `anm verify` when an overlap deeper than the tolerance is found.
    integer, parameter :: verify_failed = 3
 
+   !> The commands, in the order of `anm --help`.
+   character(len=6), parameter :: command_names(*) = [character(len=6) :: "run", "rerun", "verify", "shape", &
+                                                      "synth", "study"]
+
 contains
 
-   !> The `anm --help` text.
+   !> The `anm --help` text: every command's usage.
    subroutine write_usage(unit)
       !> Output unit.
       integer, intent(in) :: unit
+      integer :: k
+      logical :: found
+      write (unit, '(a)') "usage: anm COMMAND [ARGS]   (anm COMMAND --help: the usage of one command)", "", "commands:"
+      do k = 1, size(command_names)
+         call write_command_usage(unit, trim(command_names(k)), found)
+      end do
       write (unit, '(a)') &
-         "usage: anm COMMAND [ARGS]", &
+         "  --help, -h, --version", &
          "", &
-         "commands:", &
-         "  run FILE.nml", &
-         "        build a model as the namelist says (docs/namelist.md): model file, summary table", &
-         "        (stdout and CSV) and VRML in the output directory; progress on stderr", &
-         "  shape FILE|DIR [--order N] [--next N]", &
-         "        geometry table (NIST columns) of one coefficient file or of every *.dat in DIR,", &
-         "        computed at expansion order N (default: all coefficients); --next N uses the", &
-         "        thesis' extent scan with N angles instead of the refined extents", &
-         "  synth DIR [--count N] [--seed S] [--order N] [--bc-mean X] [--bc-sd X] [--ab-mean X]", &
-         "            [--ab-sd X] [--rough-c X] [--rough-beta X] [--sigma-rough X]", &
-         "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
-         "        coefficient files DIR/synthetic-anm-NNNNN.dat; the spectrum parameters are", &
-         "        described in docs/synthetic-shapes.md", &
-         "  verify MODEL.h5 [--resolution N] [--tolerance MM]", &
-         "        audit a model independently of the parking path: every neighbouring pair (periodic", &
-         "        images included) and the walls, by dense point sampling (N x 2N directions per", &
-         "        particle, default 120); exits with status 3 if any penetration exceeds the tolerance", &
-         "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]", &
-         "        EOB parameter studies (docs/contact.md): next = extent-box volume vs N_ext,", &
-         "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle", &
-         "  --help, --version", &
-         "", &
-         "Environment: OMP_NUM_THREADS sets the number of threads."
+         "Exit status: 0 success, 1 error, 2 usage error (unknown command or option, missing argument),", &
+         "3 anm verify found an overlap. Environment: OMP_NUM_THREADS sets the number of threads."
    end subroutine write_usage
+
+   !> The usage of one command (`anm COMMAND --help`); `found` is false for an unknown command.
+   subroutine write_command_usage(unit, command, found)
+      !> Output unit.
+      integer, intent(in) :: unit
+      !> Command name.
+      character(len=*), intent(in) :: command
+      !> Whether the command exists.
+      logical, intent(out) :: found
+      found = .true.
+      select case (command)
+      case ("run")
+         write (unit, '(a)') &
+            "  run FILE.nml [--force]", &
+            "        build a model as the namelist says (docs/namelist.md): model file, summary table", &
+            "        (stdout and CSV) and VRML in the output directory; progress on stderr. Existing", &
+            "        outputs are not overwritten without --force (or &output overwrite = .true.)"
+      case ("rerun")
+         write (unit, '(a)') &
+            "  rerun MODEL.h5 [--output DIR] [--force]", &
+            "        run again the namelist stored in a model file (/run/namelist), into DIR (default:", &
+            "        MODEL without .h5, plus -rerun); the namelist is kept there as DIR/namelist.nml"
+      case ("shape")
+         write (unit, '(a)') &
+            "  shape FILE|DIR [--order N] [--next N]", &
+            "        geometry table (NIST columns) of one coefficient file or of every *.dat in DIR,", &
+            "        computed at expansion order N (default: all coefficients); --next N uses the", &
+            "        thesis' extent scan with N angles instead of the refined extents"
+      case ("synth")
+         write (unit, '(a)') &
+            "  synth DIR [--count N] [--seed S] [--order N] [--bc-mean X] [--bc-sd X] [--ab-mean X]", &
+            "            [--ab-sd X] [--rough-c X] [--rough-beta X] [--sigma-rough X]", &
+            "        write N synthetic aggregate-like shapes (default 24, seed 1, order 20) as NIST", &
+            "        coefficient files DIR/synthetic-anm-NNNNN.dat; the spectrum parameters are", &
+            "        described in docs/synthetic-shapes.md"
+      case ("verify")
+         write (unit, '(a)') &
+            "  verify MODEL.h5 [--resolution N] [--tolerance MM]", &
+            "        audit a model independently of the parking path: every neighbouring pair (periodic", &
+            "        images included) and the walls, by dense point sampling (N x 2N directions per", &
+            "        particle, default 120); exits with status 3 if any penetration exceeds the tolerance"
+      case ("study")
+         write (unit, '(a)') &
+            "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]", &
+            "        EOB parameter studies (docs/contact.md): next = extent-box volume vs N_ext,", &
+            "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle"
+      case default
+         found = .false.
+      end select
+   end subroutine write_command_usage
 
    !> `anm shape FILE|DIR [--order N] [--next N]`: the geometry table of the shapes.
    subroutine shape_command(args, unit, error)
@@ -90,12 +130,12 @@ contains
             if (allocated(error)) return
          case default
             if (is_option(arg)) then
-               call fatal_error(error, "anm shape: unknown option '"//arg//"'", error_code%value)
+               call fatal_error(error, "anm shape: unknown option '"//arg//"'", error_code%usage)
                return
             end if
             if (allocated(path)) then
                call fatal_error(error, "anm shape: more than one path given ('"//path//"', '"//arg//"')", &
-                                error_code%value)
+                                error_code%usage)
                return
             end if
             path = arg
@@ -103,7 +143,7 @@ contains
          i = i + 1
       end do
       if (.not. allocated(path)) then
-         call fatal_error(error, "anm shape: missing FILE or DIR argument", error_code%value)
+         call fatal_error(error, "anm shape: missing FILE or DIR argument", error_code%usage)
          return
       end if
       call load_shapes(path, set, error)
@@ -148,7 +188,7 @@ contains
          arg = args(i)%s
          select case (arg)
          case ("--count")
-            call int_option(args, i, "--count", count, error)
+            call int_option(args, i, "--count", count, error, minimum=1)
          case ("--seed")
             call int_option(args, i, "--seed", seed, error)
          case ("--order")
@@ -169,7 +209,7 @@ contains
             call real_option(args, i, "--sigma-rough", par%sigma_rough, error)
          case default
             if (is_option(arg)) then
-               call fatal_error(error, "anm synth: unknown option '"//arg//"'", error_code%value)
+               call fatal_error(error, "anm synth: unknown option '"//arg//"'", error_code%usage)
                return
             end if
             dir = arg
@@ -178,7 +218,7 @@ contains
          i = i + 1
       end do
       if (.not. allocated(dir)) then
-         call fatal_error(error, "anm synth: missing output DIR argument", error_code%value)
+         call fatal_error(error, "anm synth: missing output DIR argument", error_code%usage)
          return
       end if
       call check_memory(shape_memory(real(max(0, count), wp), par%nmax), "anm synth --count "//to_string(count), &
@@ -229,7 +269,7 @@ contains
             have_tol = .true.
          case default
             if (is_option(arg)) then
-               call fatal_error(error, "anm verify: unknown option '"//arg//"'", error_code%value)
+               call fatal_error(error, "anm verify: unknown option '"//arg//"'", error_code%usage)
                return
             end if
             path = arg
@@ -237,7 +277,7 @@ contains
          i = i + 1
       end do
       if (.not. allocated(path)) then
-         call fatal_error(error, "anm verify: missing MODEL.h5 argument", error_code%value)
+         call fatal_error(error, "anm verify: missing MODEL.h5 argument", error_code%usage)
          return
       end if
       call read_model(path, model, error)
@@ -301,7 +341,7 @@ contains
          select case (arg)
          case ("--csv")
             if (i + 1 > size(args)) then
-               call fatal_error(error, "option --csv needs a value", error_code%value)
+               call fatal_error(error, "option --csv needs a value", error_code%usage)
                return
             end if
             csv = args(i + 1)%s
@@ -312,20 +352,20 @@ contains
             call int_option(args, i, "--seed", seed, error)
          case default
             if (is_option(arg)) then
-               call fatal_error(error, "anm study: unknown option '"//arg//"'", error_code%value)
+               call fatal_error(error, "anm study: unknown option '"//arg//"'", error_code%usage)
             else if (.not. allocated(kind)) then
                kind = arg
             else if (.not. allocated(path)) then
                path = arg
             else
-               call fatal_error(error, "anm study: unexpected argument '"//arg//"'", error_code%value)
+               call fatal_error(error, "anm study: unexpected argument '"//arg//"'", error_code%usage)
             end if
          end select
          if (allocated(error)) return
          i = i + 1
       end do
       if (.not. allocated(kind) .or. .not. allocated(path) .or. .not. allocated(csv)) then
-         call fatal_error(error, "anm study: usage: anm study next|nbox SHAPE_FILE --csv OUT", error_code%value)
+         call fatal_error(error, "anm study: usage: anm study next|nbox SHAPE_FILE --csv OUT", error_code%usage)
          return
       end if
       call load_shape_file(path, shape, error)
@@ -336,7 +376,7 @@ contains
       case ("nbox")
          call study_nbox(shape, order, seed, csv, error)
       case default
-         call fatal_error(error, "anm study: unknown study '"//kind//"' (next or nbox)", error_code%value)
+         call fatal_error(error, "anm study: unknown study '"//kind//"' (next or nbox)", error_code%usage)
       end select
       if (allocated(error)) return
       write (unit, '(a)') "wrote "//csv

@@ -1,13 +1,17 @@
-!> `anm run FILE.nml`: read and validate the namelist, park, write the model file (atomically), the
-!> summary table (stdout and CSV beside the model file) and the VRML file(s).
+!> `anm run FILE.nml [--force]`: read and validate the namelist, park, write the model file
+!> (atomically), the summary table (stdout and CSV beside the model file) and the VRML file(s);
+!> existing outputs are kept unless --force or `&output overwrite = .true.`. `anm rerun MODEL.h5
+!> [--output DIR] [--force]`: the same for the namelist stored in a model file.
 !>
 !> Usage:
 !>     call run_job("inputs/default.nml", output_unit, error_unit, error)
+!>     call run_command(args(2:), output_unit, error_unit, error)   ! the command line after "run"
 module anm_cli_run
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
    use anm_core_strings, only: to_string
    use anm_core_filesystem, only: make_directory, join_path, is_directory, list_directory, string_type
+   use anm_cli_arguments, only: is_option
    use anm_core_output, only: output_set_type, check_writable, remove_stale_temps
    use anm_core_resources, only: check_memory, particle_count_estimate, run_memory_estimate, shape_memory
    use anm_shapes_library, only: is_shape_file_name
@@ -16,21 +20,134 @@ module anm_cli_run
    use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_summary, only: write_summary, write_summary_csv_file
-   use anm_io_model, only: model_type, write_model_file
+   use anm_io_model, only: model_type, write_model_file, read_model
    use anm_io_vrml, only: vrml_mesh_type, write_vrml_file
    use anm_sh_expansion, only: sh_truncate
    implicit none
    private
 
-   public :: run_job, check_run_resources
+   public :: run_job, run_command, rerun_command, check_run_resources, output_files
 
    !> Program version written into model files.
    character(len=*), parameter, public :: anm_version = "0.2.0"
 
 contains
 
+   !> `anm run FILE.nml [--force]` (the arguments after "run").
+   subroutine run_command(args, out_unit, progress_unit, error, threads)
+      !> Arguments after the command name.
+      type(string_type), intent(in) :: args(:)
+      !> Units for the summary table and the progress lines.
+      integer, intent(in) :: out_unit, progress_unit
+      !> Error (usage errors with error_code%usage).
+      type(error_type), allocatable, intent(out) :: error
+      !> Number of threads (recorded in the model file).
+      integer, intent(in), optional :: threads
+      character(len=:), allocatable :: path
+      logical :: force
+      integer :: i
+      force = .false.
+      do i = 1, size(args)
+         if (args(i)%s == "--force") then
+            force = .true.
+         else if (is_option(args(i)%s)) then
+            call fatal_error(error, "anm run: unknown option '"//args(i)%s//"'", error_code%usage)
+            return
+         else if (allocated(path)) then
+            call fatal_error(error, "anm run: more than one namelist given ('"//path//"', '"//args(i)%s &
+                             //"'); usage: anm run FILE.nml [--force]", error_code%usage)
+            return
+         else
+            path = args(i)%s
+         end if
+      end do
+      if (.not. allocated(path)) then
+         call fatal_error(error, "usage: anm run FILE.nml [--force]", error_code%usage)
+         return
+      end if
+      call run_job(path, out_unit, progress_unit, error, threads, force=force)
+      if (allocated(error)) then
+         if (index(error%message, "it is an HDF5 file") > 0) error%message = error%message &
+            //"; to run again the namelist stored in a model file: anm rerun MODEL.h5 [--output DIR]"
+      end if
+   end subroutine run_command
+
+   !> `anm rerun MODEL.h5 [--output DIR] [--force]`: the namelist stored in the model (/run/namelist)
+   !> written to DIR/namelist.nml and run with its outputs in DIR (default: MODEL without ".h5",
+   !> plus "-rerun").
+   subroutine rerun_command(args, out_unit, progress_unit, error, threads)
+      !> Arguments after the command name.
+      type(string_type), intent(in) :: args(:)
+      !> Units for the summary table and the progress lines.
+      integer, intent(in) :: out_unit, progress_unit
+      !> Error (usage errors with error_code%usage).
+      type(error_type), allocatable, intent(out) :: error
+      !> Number of threads (recorded in the model file).
+      integer, intent(in), optional :: threads
+      character(len=:), allocatable :: path, dir, nml
+      logical :: force, exists
+      integer :: i, u, stat
+      character(len=256) :: msg
+      type(model_type) :: model
+      force = .false.
+      i = 1
+      do while (i <= size(args))
+         if (args(i)%s == "--force") then
+            force = .true.
+         else if (args(i)%s == "--output") then
+            if (i + 1 > size(args)) then
+               call fatal_error(error, "option --output needs a value", error_code%usage)
+               return
+            end if
+            dir = args(i + 1)%s
+            i = i + 1
+         else if (is_option(args(i)%s)) then
+            call fatal_error(error, "anm rerun: unknown option '"//args(i)%s//"'", error_code%usage)
+            return
+         else if (allocated(path)) then
+            call fatal_error(error, "anm rerun: more than one model given", error_code%usage)
+            return
+         else
+            path = args(i)%s
+         end if
+         i = i + 1
+      end do
+      if (.not. allocated(path)) then
+         call fatal_error(error, "usage: anm rerun MODEL.h5 [--output DIR] [--force]", error_code%usage)
+         return
+      end if
+      call read_model(path, model, error)
+      if (allocated(error)) return
+      if (.not. allocated(dir)) then
+         dir = path
+         if (len(dir) > 3) then
+            if (dir(len(dir) - 2:) == ".h5") dir = dir(:len(dir) - 3)
+         end if
+         dir = dir//"-rerun"
+      end if
+      call make_directory(dir, error)
+      if (allocated(error)) return
+      nml = join_path(dir, "namelist.nml")
+      inquire (file=nml, exist=exists)
+      if (exists .and. .not. force) then
+         call fatal_error(error, nml//" exists: not overwritten (anm rerun --force, or another --output DIR)", &
+                          error_code%io)
+         return
+      end if
+      open (newunit=u, file=nml, status="replace", action="write", access="stream", form="unformatted", &
+            iostat=stat, iomsg=msg)
+      if (stat == 0) write (u, iostat=stat, iomsg=msg) model%namelist//new_line("a")
+      if (stat == 0) close (u, iostat=stat, iomsg=msg)
+      if (stat /= 0) then
+         call fatal_error(error, nml//": "//trim(msg), error_code%io)
+         return
+      end if
+      write (progress_unit, '(a)') "rerun: the namelist of "//path//" (kept as "//nml//"), outputs in "//dir
+      call run_job(nml, out_unit, progress_unit, error, threads, force=force, directory=dir)
+   end subroutine rerun_command
+
    !> Run the job of a namelist file.
-   subroutine run_job(path, out_unit, progress_unit, error, threads, dist)
+   subroutine run_job(path, out_unit, progress_unit, error, threads, force, directory, dist)
       !> Namelist file.
       character(len=*), intent(in) :: path
       !> Unit for the summary table.
@@ -41,18 +158,26 @@ contains
       type(error_type), allocatable, intent(out) :: error
       !> Number of threads (recorded in the model file).
       integer, intent(in), optional :: threads
+      !> Overwrite existing outputs (as `&output overwrite = .true.`).
+      logical, intent(in), optional :: force
+      !> Output folder instead of the namelist's `&output directory`.
+      character(len=*), intent(in), optional :: directory
       !> The MPI build: phase 1 spread over the processes, which all park the same model; only
       !> the writer checks the output folder, prints progress and writes the outputs.
       class(phase1_distributor_type), intent(in), optional :: dist
       type(run_config_type) :: cfg
       type(model_type) :: model
+      type(string_type), allocatable :: outputs(:)
+      logical :: overwrite, exists
+      integer :: k
       type(particle_kind_type), allocatable :: kinds(:)
       integer, allocatable :: kind_of(:)
-      character(len=:), allocatable :: dir, base, tmp
+      character(len=:), allocatable :: dir, base, tmp, line
       type(output_set_type) :: set
 
       call read_config(path, cfg, error)
       if (allocated(error)) return
+      if (present(directory)) cfg%output%directory = directory
       if (present(dist)) then
          if (.not. dist%writer) then
             call run_parking(cfg, model, kinds, kind_of, error, dist=dist)
@@ -60,6 +185,21 @@ contains
          end if
       end if
       dir = trim(cfg%output%directory)
+      base = join_path(dir, trim(cfg%output%name))
+      overwrite = cfg%output%overwrite
+      if (present(force)) overwrite = overwrite .or. force
+      if (.not. overwrite) then
+         outputs = output_files(base, cfg%output%vrml, cfg%output%vrml_per_layer .and. cfg%shells%nlayer > 0, &
+                                cfg%shells%nlayer)
+         do k = 1, size(outputs)
+            inquire (file=outputs(k)%s, exist=exists)
+            if (exists) then
+               call fatal_error(error, outputs(k)%s//" exists: not overwritten (anm run --force, or " &
+                                //"&output overwrite = .true. in "//path//")", error_code%io)
+               return
+            end if
+         end do
+      end if
       call make_directory(dir, error)
       if (allocated(error)) then
          error%message = path//": &output: directory: "//error%message
@@ -77,7 +217,6 @@ contains
          return
       end if
       call remove_stale_temps(dir)
-      base = join_path(dir, trim(cfg%output%name))
       call run_parking(cfg, model, kinds, kind_of, error, progress_unit, dist=dist)
       if (allocated(error)) return
       model%version = anm_version
@@ -101,12 +240,41 @@ contains
       call set%commit(error)
       if (allocated(error)) return
       call write_summary(out_unit, model)
-      write (out_unit, '(a)') "model: "//base//".h5; summary: "//base//"-summary.csv"// &
-         merge("; VRML: "//base//".wrl", repeat(" ", len(base) + 12), cfg%output%vrml)
+      outputs = output_files(base, cfg%output%vrml, cfg%output%vrml_per_layer .and. cfg%shells%nlayer > 0, &
+                             cfg%shells%nlayer)
+      line = "model: "//outputs(1)%s//"; summary: "//outputs(2)%s
+      if (size(outputs) > 2) line = line//"; VRML: "//outputs(3)%s
+      do k = 4, size(outputs)
+         line = line//", "//outputs(k)%s
+      end do
+      write (out_unit, '(a)') line
       flush (out_unit)
       return
 99    call set%discard()
    end subroutine run_job
+
+   !> The files a run writes for the output base name (DIR/NAME): the model, the summary and the
+   !> VRML file, or one VRML file per layer.
+   pure function output_files(base, vrml, per_layer, nlayer) result(files)
+      !> DIR/NAME.
+      character(len=*), intent(in) :: base
+      !> VRML written; one file per layer.
+      logical, intent(in) :: vrml, per_layer
+      !> Number of shell layers.
+      integer, intent(in) :: nlayer
+      type(string_type), allocatable :: files(:)
+      integer :: l
+      files = [string_type(base//".h5"), string_type(base//"-summary.csv")]
+      if (.not. vrml) return
+      if (per_layer) then
+         files = [files, string_type(base//"-particles.wrl")]
+         do l = 1, nlayer
+            files = [files, string_type(base//"-layer"//to_string(l)//".wrl")]
+         end do
+      else
+         files = [files, string_type(base//".wrl")]
+      end if
+   end function output_files
 
    subroutine write_model_vrml(cfg, model, kinds, kind_of, base, set, error)
       type(run_config_type), intent(in) :: cfg

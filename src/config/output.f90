@@ -28,6 +28,8 @@ module anm_config_output
       logical :: vrml = .true., vrml_per_layer = .false.
       !> VRML tessellation (polar divisions) per sieve.
       integer, allocatable :: tessellation(:)
+      !> Overwrite existing outputs (otherwise `anm run` refuses, naming the file; `--force`).
+      logical :: overwrite = .false.
    end type output_config_type
 
 contains
@@ -44,9 +46,9 @@ contains
       type(error_type), allocatable, intent(out) :: error
       character(len=512) :: directory
       character(len=128) :: name
-      logical :: vrml, vrml_per_layer
+      logical :: vrml, vrml_per_layer, overwrite
       integer :: tessellation(max_sieves)
-      namelist /output/ directory, name, vrml, vrml_per_layer, tessellation
+      namelist /output/ directory, name, vrml, vrml_per_layer, tessellation, overwrite
       integer :: ig, stat, i
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -55,6 +57,7 @@ contains
       name = self%name
       vrml = self%vrml
       vrml_per_layer = self%vrml_per_layer
+      overwrite = self%overwrite
       tessellation = -1
       ig = find_group(nml, "output")
       if (ig > 0) then
@@ -93,6 +96,7 @@ contains
       self%name = name
       self%vrml = vrml
       self%vrml_per_layer = vrml_per_layer
+      self%overwrite = overwrite
 
    contains
 
@@ -119,7 +123,8 @@ contains
       character(len=:), allocatable :: text
       integer :: i
       text = "&output directory = "//quoted(trim(self%directory))//", name = "//quoted(trim(self%name)) &
-             //", vrml = "//logical_text(self%vrml)//", vrml_per_layer = "//logical_text(self%vrml_per_layer)
+             //", vrml = "//logical_text(self%vrml)//", vrml_per_layer = "//logical_text(self%vrml_per_layer) &
+             //", overwrite = "//logical_text(self%overwrite)
       do i = 1, size(self%tessellation)
          text = text//", tessellation("//to_string(i)//") = "//to_string(self%tessellation(i))
       end do

@@ -23,6 +23,9 @@ module anm_core_error
       integer :: value = 4
       !> A shape that is not star-shaped (r <= 0 somewhere).
       integer :: not_star = 5
+      !> A usage error on the command line: unknown command or option, a missing argument or
+      !> option value, an option value of the wrong type or range (`anm` exits with status 2).
+      integer :: usage = 6
    end type error_code_enum
 
    !> The error classes, used as `error_code%format`.

@@ -14,6 +14,7 @@ module anm_io_model
    use anm_core_text, only: printable
    use anm_core_output, only: output_set_type
    use anm_sh_expansion, only: sh_expansion_type, sh_from_rows, sh_to_rows
+   use anm_io_model_schema, only: model_schema
    use anm_io_hdf5, only: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, &
       & h5_read, h5_read_attr, h5_exists, h5_read_strings
    implicit none
@@ -219,7 +220,9 @@ contains
       if (allocated(error)) goto 99
       call h5_write_attr(f, "/run", "wall_time", model%wall_time, error)
       if (allocated(error)) goto 99
-      call h5_write_attr(f, "/run", "attempts", real(model%attempts, wp), error)
+      call h5_write_attr(f, "/run", "attempts", model%attempts, error)
+      if (allocated(error)) goto 99
+      call write_schema_attributes(f, error)
       if (allocated(error)) goto 99
       call h5_close(f, error)
       goto 98
@@ -229,6 +232,25 @@ contains
          if (index(error%message, path) == 1) error%message = shown//error%message(len(path) + 1:)
       end if
    end subroutine write_model_file
+
+   !> The attributes `units` and `description` of every group and dataset written, from the one
+   !> table anm_io_model_schema (docs/model-file.md lists the same rows).
+   subroutine write_schema_attributes(f, error)
+      type(h5_file_type), intent(in) :: f
+      type(error_type), allocatable, intent(out) :: error
+      integer :: k
+      do k = 1, size(model_schema)
+         associate (e => model_schema(k))
+            if (trim(e%path) /= "/") then
+               if (.not. h5_exists(f, trim(e%path))) cycle
+            end if
+            call h5_write_attr(f, trim(e%path), "units", trim(e%units), error)
+            if (allocated(error)) return
+            call h5_write_attr(f, trim(e%path), "description", trim(e%description), error)
+            if (allocated(error)) return
+         end associate
+      end do
+   end subroutine write_schema_attributes
 
    !> The shell specification as group /shells: attributes nlayer, unit, mode; datasets thickness
    !> (nlayer, in unit) and colour (nlayer x 3 as numpy reads it). docs/model-file.md.
