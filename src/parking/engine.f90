@@ -85,6 +85,7 @@ contains
       run%batch = min(rp%nthreads, rp%batch_limit)
       call system_clock(run%t0, run%rate)
       run%tlast = run%t0
+      run%vol_total = sum(cfg%sieves%target_fraction(:cfg%sieves%nsieve)) * product(cfg%box%length)
 
       select case (cfg%parking%strategy)
       case (parking_strategy%dense)

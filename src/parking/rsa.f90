@@ -16,6 +16,7 @@
 module anm_parking_rsa
    use anm_core_kinds, only: wp, i8, pi
    use anm_core_error, only: error_type
+   use anm_core_strings, only: to_string
    use anm_parking_kinds, only: kind_set_type
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_attempts, only: attempt_params_type, first_kind_of
@@ -68,6 +69,9 @@ module anm_parking_rsa
       integer(i8) :: t0 = 0, tlast = 0, rate = 1
       !> Attempts of the run so far.
       integer(i8) :: attempts = 0
+      !> Target volume of the whole run (mm^3, set by the driver) and the volume parked by the
+      !> sieves already finished (for the progress line's percent and time left).
+      real(wp) :: vol_total = 0.0_wp, vol_done = 0.0_wp
    end type run_state_type
 
    !> State of the sieve being parked.
@@ -110,6 +114,7 @@ contains
          call park_sieve(pk, ks, ap(s), rp, st, run, error)
          if (allocated(error)) return
          result(s) = st%res
+         run%vol_done = run%vol_done + st%res%vol
          carry = merge(st%target - st%res%vol, 0.0_wp, st%res%reached)
       end do
    end subroutine park_rsa
@@ -282,12 +287,21 @@ contains
       type(sieve_state_type), intent(in) :: st
       type(run_state_type), intent(inout) :: run
       integer(i8) :: t1
+      real(wp) :: elapsed, done
+      character(len=:), allocatable :: left
       if (rp%progress_unit < 0) return
       call system_clock(t1)
       if (real(t1 - run%tlast, wp) / run%rate <= 2.0_wp) return
-      write (rp%progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,es10.3,a)') "sieve ", st%sieve, ": placed ", st%res%count, &
-         ", fraction ", st%res%vol / rp%vbox, " of ", st%target_fraction, ", ", &
-         real(run%attempts, wp) / max(1.0e-9_wp, real(t1 - run%t0, wp) / run%rate), " attempts/s"
+      elapsed = real(t1 - run%t0, wp) / run%rate
+      done = 0.0_wp
+      if (run%vol_total > 0.0_wp) done = min(1.0_wp, (run%vol_done + st%res%vol) / run%vol_total)
+      ! time left from the volume rate so far: finer sieves fill more slowly, so this is a lower
+      ! estimate early in the run
+      left = "time left unknown"
+      if (done > 0.0_wp) left = "about "//to_string(nint(elapsed * (1.0_wp - done) / done))//" s left"
+      write (rp%progress_unit, '(a,i0,a,i0,a,f8.5,a,f8.5,a,f5.1,a,es10.3,a)') "sieve ", st%sieve, ": placed ", &
+         st%res%count, ", fraction ", st%res%vol / rp%vbox, " of ", st%target_fraction, "; run ", 100.0_wp * done, &
+         " % of the target volume, "//left//", ", real(run%attempts, wp) / max(1.0e-9_wp, elapsed), " attempts/s"
       flush (rp%progress_unit)   ! a log file shows the line now, not at exit (stderr may be block-buffered)
       run%tlast = t1
    end subroutine progress_line
