@@ -16,6 +16,13 @@
 !> aggregate thus costs a few bound look-ups instead of 28,800 evaluations of the aggregate's
 !> order-14 surface.
 !>
+!> Certified first filter (default): each (shape, order) also gets the contact body the engine
+!> uses (anm_contact_body), and a pair is sampled only when the certified contact test
+!> (`bodies_overlap` with `certified = .true.`) cannot prove it disjoint. A pair it clears is
+!> disjoint (guaranteed to rounding, docs/contact.md); every overlap and depth reported still
+!> comes from the dense sampling alone. `filter = .false.` samples every pair (the audit fully
+!> independent of the contact code).
+!>
 !> Usage:
 !>     call verify_model(model, 120, report)
 module anm_audit_verify
@@ -23,6 +30,9 @@ module anm_audit_verify
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
    use anm_io_model, only: model_type
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
+   use anm_core_error, only: error_type
+   use anm_contact_body, only: contact_body_type, new_contact_body
+   use anm_contact_overlap, only: contact_params_type, bodies_overlap
    implicit none
    private
 
@@ -32,6 +42,8 @@ module anm_audit_verify
    type :: verify_report_type
       !> Pairs whose bounding spheres intersect (checked by sampling).
       integer(i8) :: pairs_checked = 0
+      !> Of these, pairs the certified contact test proved disjoint (not sampled).
+      integer(i8) :: pairs_cleared = 0
       !> Pairs with a penetration above the tolerance.
       integer(i8) :: overlapping_pairs = 0
       !> Particles crossing a wall (non-periodic boxes).
@@ -68,7 +80,7 @@ contains
 
    !> Audit `model` at `resolution` polar samples; penetrations deeper than `tolerance` mm
    !> (default 1e-4 of the smallest sieve width) count as overlaps.
-   subroutine verify_model(model, resolution, report, tolerance, prune)
+   subroutine verify_model(model, resolution, report, tolerance, prune, filter)
       !> Model.
       type(model_type), intent(in) :: model
       !> Polar samples per particle (azimuthal: twice as many).
@@ -80,18 +92,27 @@ contains
       !> Skip the samples that the block bounds place outside the other particle (default true;
       !> false tests every sample, for checking the pruning).
       logical, intent(in), optional :: prune
+      !> Skip the pairs the certified contact test proves disjoint (default true; false samples
+      !> every pair whose bounding spheres intersect).
+      logical, intent(in), optional :: filter
       type(sampled_type), allocatable :: samp(:)
+      type(contact_body_type), allocatable :: bodies(:)
+      logical, allocatable :: has_body(:)
+      type(contact_params_type) :: cparams
       integer, allocatable :: key(:), kshape(:), korder(:)
       real(wp), allocatable :: rho(:)
       type(cell_list_type) :: cl
       integer :: p, k, nkey
-      integer(i8) :: npairs, nover
+      integer(i8) :: npairs, nover, ncleared
       real(wp) :: depth_max, worst_depth
       integer :: nwall
-      logical :: pruned
+      logical :: pruned, filtered
 
       pruned = .true.
       if (present(prune)) pruned = prune
+      filtered = .true.
+      if (present(filter)) filtered = filter
+      cparams%certified = .true.
       report%samples = 2 * resolution**2
       if (present(tolerance)) then
          report%tolerance = tolerance
@@ -102,9 +123,20 @@ contains
       allocate (samp(nkey))
       samp%shape = kshape(:nkey)
       samp%order = korder(:nkey)
-      !$omp parallel do default(none) shared(samp, nkey, model, resolution) private(k) schedule(dynamic)
+      allocate (bodies(merge(nkey, 0, filtered)), has_body(nkey))
+      has_body = .false.
+      !$omp parallel do default(none) shared(samp, nkey, model, resolution, bodies, has_body, filtered) &
+      !$omp& private(k) schedule(dynamic)
       do k = 1, nkey
          call sample_shape(model%shapes(samp(k)%shape), samp(k)%order, resolution, samp(k))
+         if (filtered) then
+            block
+               type(error_type), allocatable :: berr
+               ! a shape the contact code cannot certify (not star-shaped) is always sampled
+               call new_contact_body(bodies(k), model%shapes(samp(k)%shape), berr, nused=samp(k)%order)
+               has_body(k) = .not. allocated(berr)
+            end block
+         end if
       end do
       !$omp end parallel do
       allocate (rho(model%np))
@@ -116,12 +148,13 @@ contains
          call cl%insert(p, wrap(model, model%center(:, p)), rho(p))
       end do
       npairs = 0
+      ncleared = 0
       nover = 0
       depth_max = 0.0_wp
       worst_depth = 0.0_wp
       nwall = 0
-      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned) private(p) &
-      !$omp& reduction(+:npairs, nover, nwall) reduction(max:depth_max)
+      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned, bodies, has_body, &
+      !$omp& cparams) private(p) reduction(+:npairs, nover, nwall, ncleared) reduction(max:depth_max)
       block
          integer, allocatable :: cand(:)
          real(wp), allocatable :: shift(:, :)
@@ -154,6 +187,14 @@ contains
                   if (.not. positive(shift(:, i))) cycle
                end if
                npairs = npairs + 1
+               if (has_body(key(p)) .and. has_body(key(q))) then
+                  if (.not. bodies_overlap(bodies(key(p)), cw(:, p), model%rotation(:, :, p), model%scale(p), &
+                                           bodies(key(q)), cw(:, q) + shift(:, i), model%rotation(:, :, q), &
+                                           model%scale(q), cparams)) then
+                     ncleared = ncleared + 1
+                     cycle
+                  end if
+               end if
                d = max(pair_depth(model, samp, key, rho, pruned, p, cw(:, p), q, cw(:, q) + shift(:, i)), &
                        pair_depth(model, samp, key, rho, pruned, q, cw(:, q) + shift(:, i), p, cw(:, p)))
                if (d > report%tolerance) nover = nover + 1
@@ -172,6 +213,7 @@ contains
       end block
       !$omp end parallel
       report%pairs_checked = npairs
+      report%pairs_cleared = ncleared
       report%overlapping_pairs = nover
       report%wall_violations = nwall
       report%max_depth = depth_max
@@ -323,12 +365,15 @@ contains
 
    !> Memory (bytes) verify_model needs at `resolution`: per distinct (shape, order) pair the
    !> 2 resolution**2 sampled surface points and their block bounds, plus per particle its key,
-   !> bounding radius, cell-list entry and wrapped centre.
-   function verify_memory(model, resolution) result(bytes)
+   !> bounding radius, cell-list entry and wrapped centre; with the certified filter (default) also
+   !> one contact body (about 4.5 MB) per pair.
+   function verify_memory(model, resolution, filter) result(bytes)
       !> Model (validated).
       type(model_type), intent(in) :: model
       !> Polar samples (as verify_model).
       integer, intent(in) :: resolution
+      !> Certified filter (as verify_model, default true).
+      logical, intent(in), optional :: filter
       real(wp) :: bytes
       logical, allocatable :: seen(:, :)
       integer :: p, nkey, maxorder
@@ -342,6 +387,11 @@ contains
       nkey = count(seen)
       bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (24.0_wp + 40.0_wp / block**2) &
               + real(model%np, wp) * 200.0_wp
+      if (.not. present(filter)) then
+         bytes = bytes + real(nkey, wp) * 5.0e6_wp
+      else if (filter) then
+         bytes = bytes + real(nkey, wp) * 5.0e6_wp
+      end if
    end function verify_memory
 
    !> True when no point of the ball (c, r) (B's body frame, shape units) can lie inside B: the
