@@ -132,7 +132,7 @@ contains
       scale0 = m%scale
       do k = 1, 3
          m%scale = scale0 * grow(k)
-         call verify_model(m, 48, fast)
+         call verify_model(m, 48, fast, filter=.true.)
          call verify_model(m, 48, full, prune=.false., filter=.false.)
          print '(a,f6.3,a,i0,a,i0,a,es10.3)', "        scale x", grow(k), ": ", full%pairs_checked, " pairs, ", &
             full%overlapping_pairs, " overlapping, deepest ", full%max_depth
