@@ -10,7 +10,10 @@ Usage (from the repository root; `bash scripts/benchmarks.sh` installs and build
 
     python3 bench/run_all.py [--out docs/performance.md] [--skip NAME ...] [--only NAME ...]
 
-NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing.
+NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing, verify,
+shellsmm (verify: `anm verify` of M_sand against its parking; shellsmm: `inputs/shells_mm.nml`, its
+first sieve alone (start-up) and the whole job with and without shells; both beside the reference
+loop's time in the same run).
 Jobs that need ../shared/shapes (msand, table23, million with real shapes, slicing of M_sand)
 are reported as "not run" when the folder is missing.
 """
@@ -34,7 +37,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 SHAPES = SHARED / "shapes"
-ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing")
+ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing", "verify", "shellsmm")
 
 
 @dataclass
@@ -46,6 +49,7 @@ class Run:
     wall: float
     peak_mb: float
     rc: int
+    cpu: float = float("nan")   # user + system (s)
 
 
 @dataclass
@@ -64,14 +68,18 @@ def sh(cmd: str, env: dict[str, str] | None = None, cwd: Path = ROOT) -> Run:
     if env:
         e.update(env)
     with tempfile.NamedTemporaryFile("r", suffix=".time") as tf:
-        full = f"/usr/bin/time -f '%e %M' -o {tf.name} bash -c {shlex.quote(cmd)}"
+        full = f"/usr/bin/time -f '%e %M %U %S' -o {tf.name} bash -c {shlex.quote(cmd)}"
         p = subprocess.run(full, shell=True, cwd=cwd, env=e, capture_output=True, text=True)
         fields = (tf.read().strip().splitlines() or ["nan nan"])[-1].split()
     try:
         wall, peak = float(fields[0]), float(fields[1]) / 1024.0
     except (ValueError, IndexError):
         wall, peak = float("nan"), float("nan")
-    return Run(cmd, p.stdout, p.stderr, wall, peak, p.returncode)
+    try:
+        cpu = float(fields[2]) + float(fields[3])
+    except (ValueError, IndexError):
+        cpu = float("nan")
+    return Run(cmd, p.stdout, p.stderr, wall, peak, p.returncode, cpu)
 
 
 def machine() -> str:
@@ -310,6 +318,79 @@ def parking_section(rep: Report, anm: str, tmp: Path, which: set[str]) -> None:
         rep.sections.append(txt)
 
 
+def reference_loop(tmp: Path) -> tuple[str, float]:
+    """The bare C loop of ../shared/bench (200,000 spheres to 0.30): its time in this run, so that a
+    figure from a busy machine can be read as a ratio."""
+    src = SHARED / "bench/rsa_spheres.c"
+    if not src.exists():
+        return "reference loop not run (../shared/bench/rsa_spheres.c missing)", float("nan")
+    ref = tmp / "rsa_spheres"
+    if not ref.exists():
+        subprocess.run(["gcc", "-O2", "-march=native", "-o", str(ref), str(src), "-lm"], check=True)
+    r = sh(f"{ref} 200000 0.30 1000000 1")
+    m = re.search(r"seconds\s+([\d.]+)", r.stdout)
+    t = float(m.group(1)) if m else float("nan")
+    return (f"reference loop (`rsa_spheres 200000 0.30 1000000 1`, gcc -O2 -march=native): {t:.2f} s "
+            f"(load before: {load()})"), t
+
+
+def verify_section(rep: Report, anm: str, tmp: Path) -> None:
+    """`anm verify` of M_sand against the parking of M_sand (2 threads each)."""
+    if not SHAPES.is_dir():
+        rep.sections.append("### `anm verify` of M_sand\n\nnot run: ../shared/shapes missing\n")
+        return
+    ref_text, _ = reference_loop(tmp)
+    job = park(anm, ROOT / "inputs/msand.nml", tmp, "verify_msand", 2, verify=False)
+    v = sh(f"{shlex.quote(anm)} verify {shlex.quote(str(job.model))}", env={"OMP_NUM_THREADS": "2"}) \
+        if job.model else None
+    ref2, _ = reference_loop(tmp)
+    if v is None:
+        rep.sections.append(f"### `anm verify` of M_sand\n\nparking failed (exit {job.run.rc})\n")
+        return
+    ratio = v.wall / job.run.wall
+    rep.target("`anm verify` of M_sand / parking M_sand (wall, 2 threads)",
+               f"{v.wall:.1f} s / {job.run.wall:.1f} s = {ratio:.2f}", "<= 1", ratio <= 1 and v.rc == 0)
+    rep.sections.append(block("`anm verify` of M_sand", "OMP_NUM_THREADS=2 anm run inputs/msand.nml; "
+                              "OMP_NUM_THREADS=2 anm verify out/msand/model.h5",
+                              f"parking: {job.run.wall:.2f} s wall, {job.run.cpu:.2f} s CPU, {job.run.peak_mb:.0f} MB\n"
+                              f"verify:  {v.wall:.2f} s wall, {v.cpu:.2f} s CPU, {v.peak_mb:.0f} MB, exit {v.rc}\n"
+                              + v.stdout.strip() + "\n" + ref_text + "\n" + ref2))
+
+
+def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
+    """inputs/shells_mm.nml: the first sieve alone (start-up), then the job with and without shells."""
+    nml = ROOT / "inputs/shells_mm.nml"
+    if not SHAPES.is_dir():
+        rep.sections.append("### Shells in mm\n\nnot run: ../shared/shapes missing\n")
+        return
+    first = {"nsieve = 3": "nsieve = 1", "min_width = 4.75, 3.35, 2.36": "min_width = 4.75",
+             "max_width = 6.3, 4.75, 3.35": "max_width = 6.3", "fraction = 0.12, 0.10, 0.08": "fraction = 0.12",
+             "'../shared/shapes/MA111-7-coarse', '../shared/shapes/MA111-7-coarse', '../shared/shapes/MA111-7-coarse'":
+             "'../shared/shapes/MA111-7-coarse'", "order = 14, 14, 14": "order = 14"}
+    noshell = {"&shells nlayer = 1, thickness = 0.1, thickness_unit = 'mm', mode = 'exclude' /": ""}
+    ref_text, _ = reference_loop(tmp)
+    j1 = park(anm, nml, tmp, "shellsmm_first", 2, edits=first, verify=False)
+    m = re.search(r"sieve 1 done:.*?([\d.]+) s\s*$", j1.run.stderr + j1.run.stdout, re.M)
+    t_first = float(m.group(1)) if m else float("nan")
+    rep.target("shells in mm: first sieve (start-up), 2 threads", f"{t_first:.1f} s (whole one-sieve run "
+               f"{j1.run.wall:.1f} s)", "<= 1 s", t_first <= 1)
+    jw = park(anm, nml, tmp, "shellsmm", 2, verify=True)
+    jn = park(anm, nml, tmp, "shellsmm_noshell", 2, edits=noshell, verify=False)
+    ref2, _ = reference_loop(tmp)
+    ratio = jw.run.cpu / jn.run.cpu
+    rep.target("shells in mm: CPU with / without shells", f"{jw.run.cpu:.0f} s / {jn.run.cpu:.0f} s = {ratio:.1f}",
+               "<= 2", ratio <= 2)
+    rep.target("shells in mm: peak memory", f"{jw.run.peak_mb:.0f} MB (without shells {jn.run.peak_mb:.0f} MB)",
+               "<= 1024 MB", jw.run.peak_mb <= 1024)
+    rep.sections.append(block("Shells in mm (`inputs/shells_mm.nml`)", "OMP_NUM_THREADS=2 anm run inputs/shells_mm.nml "
+                              "(and its first sieve alone, and without the &shells line)",
+                              f"first sieve alone: {j1.run.wall:.2f} s wall, {j1.run.cpu:.2f} s CPU, "
+                              f"{j1.run.peak_mb:.0f} MB; sieve 1 done at {t_first:.2f} s\n"
+                              f"with shells:    {job_row('shells_mm', 2, jw)}\n  CPU {jw.run.cpu:.1f} s\n"
+                              f"without shells: {job_row('shells_mm without shells', 2, jn)}\n  CPU {jn.run.cpu:.1f} s\n"
+                              + ref_text + "\n" + ref2))
+
+
 def rsa_section(rep: Report, anm: str, tmp: Path, rows: list[str], speedups: dict) -> None:
     src = SHARED / "bench/rsa_spheres.c"
     edge = 140.82046803408818   # 200,000 spheres of radius 1 at a packing fraction of 0.30
@@ -402,6 +483,12 @@ def main() -> int:
         if which & {"default", "msand", "table23", "million", "rsa"}:
             print("== parking", file=sys.stderr)
             parking_section(rep, args.anm, tmp, which)
+        if "verify" in which:
+            print("== verify", file=sys.stderr)
+            verify_section(rep, args.anm, tmp)
+        if "shellsmm" in which:
+            print("== shellsmm", file=sys.stderr)
+            shellsmm_section(rep, args.anm, tmp)
         if "slicing" in which:
             model = ROOT / "out/msand/model.h5"
             if SHAPES.is_dir():

@@ -27,7 +27,8 @@ contains
               new_unittest("verify: overlap across the periodic boundary", test_verify_periodic), &
               new_unittest("verify: a particle through a wall fails", test_verify_wall), &
               new_unittest("verify: pruned sampling gives the report of every sample (sizes 8:1)", &
-                           test_verify_pruning)]
+                           test_verify_pruning), &
+              new_unittest("verify: a small overlap planted in a big parked model is found", test_verify_planted)]
    end subroutine collect_audit
 
    !> Park the namelist `text` (written to build/test-tmp/name).
@@ -114,8 +115,9 @@ contains
       call check(error, rep%wall_violations, 1, "wall crossing not found")
    end subroutine test_verify_wall
    !> A parked model of synthetic shapes of two sizes (8:1), then the same with every particle
-   !> grown by 0.2 % and by 3 % (shallow and deeper overlaps): the block bounds must not change
-   !> the pairs, the count of overlaps, the worst pair or the deepest penetration.
+   !> grown by 0.2 % and by 3 % (shallow and deeper overlaps): neither the block bounds nor the
+   !> certified first filter may change the pairs, the count of overlaps, the worst pair or the
+   !> deepest penetration (against every sample of every pair).
    subroutine test_verify_pruning(error)
       type(error_type), allocatable, intent(out) :: error
       type(model_type) :: m
@@ -130,8 +132,8 @@ contains
       scale0 = m%scale
       do k = 1, 3
          m%scale = scale0 * grow(k)
-         call verify_model(m, 48, fast)
-         call verify_model(m, 48, full, prune=.false.)
+         call verify_model(m, 48, fast, filter=.true.)
+         call verify_model(m, 48, full, prune=.false., filter=.false.)
          print '(a,f6.3,a,i0,a,i0,a,es10.3)', "        scale x", grow(k), ": ", full%pairs_checked, " pairs, ", &
             full%overlapping_pairs, " overlapping, deepest ", full%max_depth
          call check(error, fast%pairs_checked == full%pairs_checked .and. &
@@ -145,5 +147,78 @@ contains
          if (allocated(error)) return
       end do
    end subroutine test_verify_pruning
+
+   !> A parked model of about 1,900 synthetic sand grains (order 5) passes; then one grain is moved
+   !> towards its nearest neighbour until the dense sampling of that pair alone (no filter)
+   !> finds a penetration of about 0.2 % of the grain size: the audit of the whole model (certified
+   !> filter on) must report that pair as the deepest, with the same depth.
+   subroutine test_verify_planted(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m, pair
+      type(verify_report_type) :: rep
+      real(wp) :: d(3), dq, u(3), lo, hi, t, best, target
+      integer :: p, q, j, it
+      call run_nml("planted.nml", "&box length = 6, 6, 6 /"//new_line("a")// &
+                   "&sieves nsieve = 1, min_width = 0.25, max_width = 0.3, fraction = 0.12, order = 5 /" &
+                   //new_line("a")//"&synthetic count = 6 /"//new_line("a")//"&run seed = 3 /", m, error)
+      if (allocated(error)) return
+      call verify_model(m, 48, rep)
+      print '(a,i0,a,i0,a,i0,a)', "        ", m%np, " grains, ", rep%pairs_checked, " pairs, ", rep%pairs_cleared, &
+         " cleared by the certified test"
+      call check(error, m%np > 1000 .and. rep%overlapping_pairs == 0_i8 .and. rep%pairs_cleared > 0_i8, &
+                 "parked model not clean or too small")
+      if (allocated(error)) return
+      ! nearest neighbour of grain p (minimum image)
+      p = m%np / 2
+      q = 0
+      best = huge(1.0_wp)
+      do j = 1, m%np
+         if (j == p) cycle
+         d = m%center(:, j) - m%center(:, p)
+         d = d - m%box * anint(d / m%box)
+         if (norm2(d) < best) then
+            best = norm2(d)
+            q = j
+         end if
+      end do
+      d = m%center(:, q) - m%center(:, p)
+      d = d - m%box * anint(d / m%box)
+      dq = norm2(d)
+      u = d / dq
+      ! the pair on its own, q at p + d
+      pair = m
+      pair%np = 2
+      pair%center = reshape([m%center(:, p), m%center(:, p) + d], [3, 2])
+      pair%rotation = m%rotation(:, :, [p, q])
+      pair%scale = m%scale([p, q])
+      pair%shape = m%shape([p, q])
+      pair%nmax = m%nmax([p, q])
+      pair%sieve = m%sieve([p, q])
+      target = 2.0e-3_wp * 0.25_wp
+      ! bisection on the move t of p towards q: depth(lo) < target <= depth(hi)
+      lo = 0.0_wp
+      hi = dq
+      do it = 1, 40
+         t = 0.5_wp * (lo + hi)
+         pair%center(:, 1) = m%center(:, p) + t * u
+         call verify_model(pair, 48, rep, filter=.false.)
+         if (rep%max_depth >= target) then
+            hi = t
+         else
+            lo = t
+         end if
+      end do
+      pair%center(:, 1) = m%center(:, p) + hi * u
+      call verify_model(pair, 48, rep, filter=.false.)
+      best = rep%max_depth
+      m%center(:, p) = m%center(:, p) + hi * u
+      call verify_model(m, 48, rep)
+      print '(a,es10.3,a,es10.3,a,i0,a)', "        planted: move ", hi, " mm, depth ", best, " mm; found ", &
+         rep%overlapping_pairs, " overlapping pair(s)"
+      call check(error, rep%overlapping_pairs >= 1_i8 .and. any(rep%worst == p) .and. any(rep%worst == q), &
+                 "planted overlap not found")
+      if (allocated(error)) return
+      call check(error, rep%max_depth, best, "planted depth", rel=1.0e-9_wp)
+   end subroutine test_verify_planted
 
 end module test_audit

@@ -308,6 +308,7 @@ contains
       write (unit, '(a,i0)') "  particles:            ", model%np
       write (unit, '(a,i0,a)') "  samples per particle: ", rep%samples, " directions"
       write (unit, '(a,i0)') "  pairs checked:        ", rep%pairs_checked
+      write (unit, '(a,i0)') "  of which cleared by the certified contact test: ", rep%pairs_cleared
       write (unit, '(a,i0)') "  overlapping pairs:    ", rep%overlapping_pairs
       if (.not. model%periodic) write (unit, '(a,i0)') "  wall violations:      ", rep%wall_violations
       write (unit, '(a,es12.5,a)') "  largest penetration:  ", rep%max_depth, " mm"

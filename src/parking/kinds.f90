@@ -1,6 +1,8 @@
 !> Particle kinds: the precomputed data of one (sieve, shape[, width level]) combination (geometry
 !> at the sieve's order, contact body, shell layers) and the set of them for a run, built lazily
-!> (a kind is built when first needed; a kind equal to an earlier one is built once and copied).
+!> (a kind is built when first needed; a kind equal to an earlier one is built once and copied;
+!> the geometry and bare contact body of a (shape, order) are built once and copied to its width
+!> levels, which differ only in their shells).
 !>
 !> The kinds of sieve s are `first(s) .. first(s) + count(s) - 1`: `nlev` blocks (width levels,
 !> shells in mm) of the sieve's shapes.
@@ -82,8 +84,10 @@ module anm_parking_kinds
       integer, allocatable :: first(:), count(:)
       !> The kind each kind is a copy of (itself when it is built on its own).
       integer, allocatable :: same(:)
-      !> Kinds built so far.
-      logical, allocatable :: built(:)
+      !> The kind of the same (shape, order) whose geometry and bare body a kind copied (set when built).
+      integer, allocatable :: base(:)
+      !> Kinds built so far; kinds whose geometry and bare body are built (`base`s).
+      logical, allocatable :: built(:), base_built(:)
       !> The run's shapes and names (the model's).
       type(sh_expansion_type), allocatable :: shapes(:)
       type(string_type), allocatable :: names(:)
@@ -141,8 +145,10 @@ contains
       end do
       ! a kind equal to an earlier one (same shape and order, and with shells in mm the same width:
       ! e.g. two sieves of one source) is built once and copied (build)
-      allocate (ks%same(n), ks%built(n))
+      allocate (ks%same(n), ks%built(n), ks%base(n), ks%base_built(n))
       ks%built = .false.
+      ks%base_built = .false.
+      ks%base = [(i, i=1, n)]
       do i = 1, n
          ks%same(i) = i
          do j = 1, i - 1
@@ -157,8 +163,9 @@ contains
       end do
    end subroutine new_kind_set
 
-   !> Build the kinds `list` that are not built yet: their originals (`same`) in parallel, then the
-   !> copies. A failure (a shell that cannot be built) is returned.
+   !> Build the kinds `list` that are not built yet: the geometry and bare bodies of their bases
+   !> (`base`) in parallel, then their originals' (`same`) shells in parallel, then the copies. A
+   !> failure (a shell that cannot be built) is returned.
    subroutine build(self, kinds, list, error)
       !> Bookkeeping.
       class(kind_set_type), intent(inout) :: self
@@ -171,7 +178,7 @@ contains
       type(error_type), allocatable :: errs(:)
       logical, allocatable :: want(:), failed(:)
       integer, allocatable :: todo(:)
-      integer :: i, k, sieve, level
+      integer :: i, j, k, sieve, level
       allocate (want(size(kinds)))
       want = .false.
       do i = 1, size(list)
@@ -180,9 +187,52 @@ contains
       want = want .and. .not. self%built
       todo = pack([(k, k=1, size(kinds))], want)
       if (size(todo) > 0) then
+         ! the bases first: geometry and bare body, once per (shape, order): a kind of the same
+         ! (shape, order) built earlier, else the first such kind of this list
+         do i = 1, size(todo)
+            k = todo(i)
+            if (self%base_built(k)) then
+               self%base(k) = k
+               cycle
+            end if
+            self%base(k) = k
+            do j = 1, size(kinds)
+               if (kinds(j)%shape /= kinds(k)%shape .or. kinds(j)%order /= kinds(k)%order) cycle
+               if (self%base_built(j) .or. (j < k .and. want(j))) then
+                  if (self%base_built(j) .or. self%base(j) == j) then
+                     self%base(k) = j
+                     exit
+                  end if
+               end if
+            end do
+         end do
+         block
+            integer, allocatable :: bases(:)
+            bases = pack(todo, self%base(todo) == todo .and. .not. self%base_built(todo))
+            if (size(bases) > 0) then
+               allocate (errs(size(bases)), failed(size(bases)))
+               failed = .false.
+               call build_originals(self, kinds, bases, failed, errs, .true.)
+               do i = 1, size(bases)
+                  if (failed(i)) then
+                     call fatal_error(error, errs(i)%message, errs(i)%stat)
+                     return
+                  end if
+               end do
+               self%base_built(bases) = .true.
+               deallocate (errs, failed)
+            end if
+         end block
+         do i = 1, size(todo)
+            k = todo(i)
+            if (self%base(k) /= k) then
+               call copy_base(kinds(self%base(k)), kinds(k))
+               self%base_built(k) = .true.
+            end if
+         end do
          allocate (errs(size(todo)), failed(size(todo)))
          failed = .false.
-         call build_originals(self, kinds, todo, failed, errs)
+         call build_originals(self, kinds, todo, failed, errs, .false.)
          do i = 1, size(todo)
             if (failed(i)) then
                call fatal_error(error, errs(i)%message, errs(i)%stat)
@@ -203,20 +253,39 @@ contains
       end do
    end subroutine build
 
-   !> Build kinds(todo) in parallel (each kind by one thread; failures in failed/errs).
-   subroutine build_originals(ks, kinds, todo, failed, errs)
+   !> A kind's geometry and bare body from its base (another width level of its shape and order).
+   subroutine copy_base(from, kd)
+      type(particle_kind_type), intent(in) :: from
+      type(particle_kind_type), intent(inout) :: kd
+      kd%width = from%width
+      kd%length = from%length
+      kd%volume = from%volume
+      kd%body = from%body
+      kd%r_out = from%body%r_max
+      kd%r_in_query = from%body%r_min
+      kd%r_in_parked = from%body%r_min
+   end subroutine copy_base
+
+   !> Build kinds(todo) in parallel (each kind by one thread; failures in failed/errs): their
+   !> geometry and bare body (`bases`) or, with these in place, their shells.
+   subroutine build_originals(ks, kinds, todo, failed, errs, bases)
       type(kind_set_type), intent(in) :: ks
       type(particle_kind_type), intent(inout) :: kinds(:)
       integer, intent(in) :: todo(:)
       logical, intent(inout) :: failed(:)
       type(error_type), intent(inout) :: errs(:)
+      logical, intent(in) :: bases
       integer :: i
-      !$omp parallel do default(none) shared(ks, kinds, todo, failed, errs) private(i) schedule(dynamic)
+      !$omp parallel do default(none) shared(ks, kinds, todo, failed, errs, bases) private(i) schedule(dynamic)
       do i = 1, size(todo)
          block
             type(error_type), allocatable :: err
             associate (kd => kinds(todo(i)))
-               call prepare_one(ks%p, ks%shapes(kd%shape), ks%names(kd%shape)%s, kd, err)
+               if (bases) then
+                  call prepare_base(ks%p, ks%shapes(kd%shape), kd, err)
+               else
+                  call prepare_shells(ks%p, ks%shapes(kd%shape), ks%names(kd%shape)%s, kd, err)
+               end if
             end associate
             if (allocated(err)) then
                failed(i) = .true.
@@ -235,19 +304,14 @@ contains
           / width_levels
    end function level_width
 
-   !> Geometry, contact body and shells of one kind.
-   subroutine prepare_one(p, shape, name, kd, error)
+   !> Geometry and bare contact body of one kind (shared by its width levels).
+   subroutine prepare_base(p, shape, kd, error)
       type(kind_params_type), intent(in) :: p
       type(sh_expansion_type), intent(in) :: shape
-      character(len=*), intent(in) :: name
       type(particle_kind_type), intent(inout) :: kd
       type(error_type), allocatable, intent(out) :: error
       type(shape_geometry_type) :: g
       type(sh_expansion_type) :: s
-      type(shell_report_type), allocatable :: reports(:)
-      real(wp), allocatable :: t(:)
-      real(wp) :: w, sc
-      integer :: k
       s = sh_truncate(shape, kd%order)
       call compute_geometry(s, g)
       kd%width = g%width
@@ -258,7 +322,22 @@ contains
       kd%r_out = kd%body%r_max
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
+   end subroutine prepare_base
+
+   !> Shells of one kind whose geometry and bare body are in place.
+   subroutine prepare_shells(p, shape, name, kd, error)
+      type(kind_params_type), intent(in) :: p
+      type(sh_expansion_type), intent(in) :: shape
+      character(len=*), intent(in) :: name
+      type(particle_kind_type), intent(inout) :: kd
+      type(error_type), allocatable, intent(out) :: error
+      type(sh_expansion_type) :: s
+      type(shell_report_type), allocatable :: reports(:)
+      real(wp), allocatable :: t(:)
+      real(wp) :: w, sc
+      integer :: k
       if (p%nlayer == 0) return
+      s = sh_truncate(shape, kd%order)
       sc = 1.0_wp
       if (p%unit == thickness_unit%mm) then
          w = level_width(p, kd)
@@ -282,5 +361,5 @@ contains
       kd%r_out = max(kd%r_out, kd%shell_body%r_max)
       kd%r_in_query = kd%shell_body%r_min
       if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
-   end subroutine prepare_one
+   end subroutine prepare_shells
 end module anm_parking_kinds
