@@ -731,14 +731,7 @@ contains
       e(:, 2) = cross(e(:, 3), e(:, 1))
    end function frame
 
-   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
-   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
-   !> bits (post/tests/test_identical_models.py).
-   pure function cross(a, b) result(c)
-      real(wp), intent(in) :: a(3), b(3)
-      real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
-   end function cross
+   include "anm_cross.inc"
 
    !> r and its angular derivatives on the grid rows i0..i1 of the regular grid
    !> theta_i = i pi/nt (i = 0..nt), phi_j = 2 pi j/np (j = 0..np, column np repeating column 0; np

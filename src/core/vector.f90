@@ -12,11 +12,5 @@ module anm_core_vector
 
 contains
 
-   !> Cross product a x b.
-   pure function cross(a, b) result(c)
-      !> Vectors.
-      real(wp), intent(in) :: a(3), b(3)
-      real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
-   end function cross
+   include "anm_cross.inc"
 end module anm_core_vector

@@ -88,14 +88,7 @@ contains
       thickness = best
    end subroutine particle_dimensions
 
-   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
-   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
-   !> bits (post/tests/test_identical_models.py).
-   pure function cross(a, b) result(c)
-      real(wp), intent(in) :: a(3), b(3)
-      real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
-   end function cross
+   include "anm_cross.inc"
 
    pure subroutine perpendicular_pair(u, e1, e2)
       real(wp), intent(in) :: u(3)

@@ -870,14 +870,7 @@ contains
       d = a(:, 1) * b(:, 1) + a(:, 2) * b(:, 2) + a(:, 3) * b(:, 3)
    end function dot_lanes
 
-   !> Cross product: a local copy of `anm_core_vector`'s `cross`, kept so that the compiler inlines
-   !> it; the out-of-line call contracts the products into FMAs differently and changes the models'
-   !> bits (post/tests/test_identical_models.py).
-   pure function cross(a, b) result(c)
-      real(wp), intent(in) :: a(3), b(3)
-      real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
-   end function cross
+   include "anm_cross.inc"
 
    !> The sample whose offset point x_s + t n_s is best aligned with u (the Newton start).
    pure subroutine start_point(surf, u, t, ts, ps)

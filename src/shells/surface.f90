@@ -513,8 +513,10 @@ contains
       !> Vectors.
       real(wp), intent(in) :: a(3), b(3)
       real(wp) :: c(3)
-      c = [a(2) * b(3) - a(3) * b(2), a(3) * b(1) - a(1) * b(3), a(1) * b(2) - a(2) * b(1)]
+      c = cross(a, b)
    end function cross3
+
+   include "anm_cross.inc"
 
    !> Local minimisation of |y - x(theta, phi)| by Newton's method (Gauss-Newton with step
    !> halving where the Hessian is not positive definite), from (theta, phi).
