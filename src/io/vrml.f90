@@ -1,7 +1,9 @@
-!> VRML 2.0 (VRML97) output of a model: each distinct surface (a shape at an order, coloured by
-!> sieve, or a shell layer) is tessellated once in its body frame and DEF'd; each particle is a
-!> Transform (translation, rotation, uniform scale) that USEs it. Files stay small for thousands of
-!> particles and open in ParaView, MeshLab, FreeCAD or view3dscene (docs/vrml.md).
+!> VRML 2.0 (VRML97) output of a model: each distinct surface (a shape at an order, or a shell
+!> layer) is tessellated once in its body frame; every instance is placed in world coordinates and
+!> all instances of one look (a sieve's colour, a shell layer's colour and transparency) share one
+!> Shape with one IndexedFaceSet. VTK/ParaView import this in time linear in the particles (one
+!> Transform per particle, the earlier layout, is quadratic there); it opens in ParaView, MeshLab,
+!> FreeCAD and view3dscene (docs/vrml.md).
 !>
 !> Usage:
 !>     meshes(k) = vrml_mesh_type(shape, tess=16, colour=[0.8,0.6,0.4], transparency=0.0)
@@ -27,6 +29,11 @@ module anm_io_vrml
       !> Transparency in [0, 1] (shells are drawn translucent).
       real(wp) :: transparency = 0.0_wp
    end type vrml_mesh_type
+
+   !> Vertices of one tessellated surface in its body frame (3, nvert).
+   type :: body_mesh_type
+      real(wp), allocatable :: v(:, :)
+   end type body_mesh_type
 
    interface
       function c_rename(old, new) bind(c, name="rename") result(stat)
@@ -85,9 +92,7 @@ contains
       real(wp), intent(in) :: scale(:)
       !> Error naming the file.
       type(error_type), allocatable, intent(out) :: error
-      integer :: unit, stat, i, k
-      logical, allocatable :: defined(:)
-      real(wp) :: axis(3), angle
+      integer :: unit, stat
       character(len=512) :: msg
       character(len=:), allocatable :: tmp
 
@@ -98,24 +103,10 @@ contains
          return
       end if
       write (unit, '(a)') "#VRML V2.0 utf8", "# Anm model", "WorldInfo { title ""Anm model"" }"
-      write (unit, '(a,3(f0.4,1x),a)') "Viewpoint { position ", 0.5_wp * box(1), 0.5_wp * box(2), 2.5_wp * box(3), &
+      write (unit, '(a,3(es13.6,1x),a)') "Viewpoint { position ", 0.5_wp * box(1), 0.5_wp * box(2), 2.5_wp * box(3), &
          " description ""front"" }"
       call write_box(unit, box)
-      allocate (defined(size(meshes)))
-      defined = .false.
-      do i = 1, size(mesh_of)
-         k = mesh_of(i)
-         call axis_angle(rotation(:, :, i), axis, angle)
-         write (unit, '(a,3(es14.7,1x),a,4(es14.7,1x),a,3(es14.7,1x),a)') "Transform { translation ", center(:, i), &
-            " rotation ", axis, angle, " scale ", scale(i), scale(i), scale(i), " children ["
-         if (defined(k)) then
-            write (unit, '(a,i0,a)') "  USE M", k, " ] }"
-         else
-            call write_mesh(unit, k, meshes(k))
-            write (unit, '(a)') " ] }"
-            defined(k) = .true.
-         end if
-      end do
+      call write_groups(unit, box, meshes, mesh_of, center, rotation, scale)
       close (unit, iostat=stat)
       if (stat /= 0) then
          call fatal_error(error, path//": error closing the VRML file", error_code%io)
@@ -137,52 +128,124 @@ contains
       end do
       write (unit, '(a)') "Shape { appearance Appearance { material Material { emissiveColor 0.2 0.2 0.2 } }", &
          " geometry IndexedLineSet { coord Coordinate { point ["
-      do i = 1, 8
-         write (unit, '(3(f0.4,1x),a)') v(:, i), ","
-      end do
+      write (unit, '(3(es13.6,1x),",")') v
       write (unit, '(a)') "] } coordIndex [ 0 1 3 2 0 -1 4 5 7 6 4 -1 0 4 -1 1 5 -1 2 6 -1 3 7 -1 ] } }"
    end subroutine write_box
 
-   !> DEF'd Shape of one mesh: a latitude-longitude tessellation with the two poles.
-   subroutine write_mesh(unit, k, mesh)
-      integer, intent(in) :: unit, k
+   !> One Shape per look (colour and transparency: a sieve's particles, or a shell layer), its
+   !> IndexedFaceSet holding every instance of that look with vertices in world coordinates.
+   !> VTK's importer reads this in time linear in the instances (one Transform per particle is
+   !> quadratic there; docs/vrml.md). Numbers are written with a leading zero (0.55, not .55).
+   subroutine write_groups(unit, box, meshes, mesh_of, center, rotation, scale)
+      integer, intent(in) :: unit
+      real(wp), intent(in) :: box(3)
+      type(vrml_mesh_type), intent(in) :: meshes(:)
+      integer, intent(in) :: mesh_of(:)
+      real(wp), intent(in) :: center(:, :), rotation(:, :, :), scale(:)
+      type(body_mesh_type), allocatable :: body(:)
+      integer, allocatable :: group(:), nvert(:)
+      integer :: k, j, g, ngroup, i, off, w, count
+      real(wp) :: reach
+      character(len=32) :: vfmt
+
+      allocate (body(size(meshes)), group(size(meshes)), nvert(size(meshes)))
+      ngroup = 0
+      do k = 1, size(meshes)
+         group(k) = 0
+         do j = 1, k - 1
+            if (all(meshes(j)%colour == meshes(k)%colour) .and. meshes(j)%transparency == meshes(k)%transparency) then
+               group(k) = group(j)
+               exit
+            end if
+         end do
+         if (group(k) == 0) then
+            ngroup = ngroup + 1
+            group(k) = ngroup
+         end if
+         nvert(k) = 0
+         if (any(mesh_of == k)) then
+            call body_vertices(meshes(k), body(k)%v)
+            nvert(k) = size(body(k)%v, 2)
+         end if
+      end do
+      ! fixed width wide enough for every coordinate, so that gfortran writes the leading zero
+      reach = maxval(abs(box))
+      if (size(mesh_of) > 0) reach = max(reach, maxval(abs(center)) + maxval(abs(scale)) * &
+                                          maxval([(vertex_reach(body(k)), k = 1, size(meshes))]))
+      w = 6 + max(1, ceiling(log10(max(1.0_wp, reach + 1.0_wp))))
+      write (vfmt, '(a,i0,a)') "(3(f", w, ".4,1x),"","")"
+      do g = 1, ngroup
+         count = 0
+         do i = 1, size(mesh_of)
+            if (group(mesh_of(i)) == g) count = count + 1
+         end do
+         if (count == 0) cycle
+         k = findloc(group, g, dim=1)
+         write (unit, '(a,i0,a)') "# ", count, " surfaces"
+         write (unit, '(a,3(f6.4,1x),a,f5.3,a)') "Shape { appearance Appearance { material Material { diffuseColor ", &
+            meshes(k)%colour, "transparency ", meshes(k)%transparency, " } }"
+         write (unit, '(a)') "  geometry IndexedFaceSet { creaseAngle 1.0 solid FALSE coord Coordinate { point ["
+         do i = 1, size(mesh_of)
+            k = mesh_of(i)
+            if (group(k) /= g) cycle
+            write (unit, vfmt) (center(:, i) + scale(i) * matmul(rotation(:, :, i), body(k)%v(:, j)), j = 1, nvert(k))
+         end do
+         write (unit, '(a)') "  ] } coordIndex ["
+         off = 0
+         do i = 1, size(mesh_of)
+            k = mesh_of(i)
+            if (group(k) /= g) cycle
+            call write_faces(unit, max(4, meshes(k)%tess), off)
+            off = off + nvert(k)
+         end do
+         write (unit, '(a)') "  ] } }"
+      end do
+   end subroutine write_groups
+
+   !> Largest vertex distance of a tessellated surface (0 if not tessellated).
+   pure function vertex_reach(b) result(r)
+      type(body_mesh_type), intent(in) :: b
+      real(wp) :: r
+      r = 0.0_wp
+      if (allocated(b%v)) r = maxval(norm2(b%v, dim=1))
+   end function vertex_reach
+
+   !> Body-frame vertices of a mesh: a latitude-longitude tessellation, rings i = 1..nt-1
+   !> (theta = pi i / nt, 2 nt points each), then the north and south poles.
+   subroutine body_vertices(mesh, v)
       type(vrml_mesh_type), intent(in) :: mesh
-      integer :: nt, np, i, j, a, b, c, d, north, south
+      real(wp), allocatable, intent(out) :: v(:, :)
+      integer :: nt, np, i, j, n
       real(wp) :: th, ph, u(3)
       nt = max(4, mesh%tess)
       np = 2 * nt
-      write (unit, '(a,i0,a)') "  DEF M", k, " Shape { appearance Appearance { material Material {"
-      write (unit, '(a,3(f0.4,1x),a,f0.3,a)') "    diffuseColor ", mesh%colour, " transparency ", mesh%transparency, " } }"
-      write (unit, '(a)') "    geometry IndexedFaceSet { creaseAngle 1.0 solid FALSE coord Coordinate { point ["
-      ! vertices: rings i = 1..nt-1 (theta = pi i / nt), then the poles
+      allocate (v(3, (nt - 1) * np + 2))
+      n = 0
       do i = 1, nt - 1
          th = pi * i / real(nt, wp)
          do j = 0, np - 1
             ph = 2.0_wp * pi * j / real(np, wp)
             u = [sin(th) * cos(ph), sin(th) * sin(ph), cos(th)]
-            write (unit, '(3(es13.6,1x),a)') mesh%shape%radius_dir(u) * u, ","
+            n = n + 1
+            v(:, n) = mesh%shape%radius_dir(u) * u
          end do
       end do
-      write (unit, '(3(es13.6,1x),a)') mesh%shape%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]) * [0.0_wp, 0.0_wp, 1.0_wp], ","
-      write (unit, '(3(es13.6,1x),a)') mesh%shape%radius_dir([0.0_wp, 0.0_wp, -1.0_wp]) * [0.0_wp, 0.0_wp, -1.0_wp], ","
-      write (unit, '(a)') "    ] } coordIndex ["
-      north = (nt - 1) * np
+      v(:, n + 1) = mesh%shape%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]) * [0.0_wp, 0.0_wp, 1.0_wp]
+      v(:, n + 2) = mesh%shape%radius_dir([0.0_wp, 0.0_wp, -1.0_wp]) * [0.0_wp, 0.0_wp, -1.0_wp]
+   end subroutine body_vertices
+
+   !> Faces of one instance (vertices numbered from off): triangles at the poles, quads between rings.
+   subroutine write_faces(unit, nt, off)
+      integer, intent(in) :: unit, nt, off
+      integer :: np, i, j, north, south
+      np = 2 * nt
+      north = off + (nt - 1) * np
       south = north + 1
-      do j = 0, np - 1
-         write (unit, '(3(i0,1x),a)') north, mod(j + 1, np), j, "-1"
-      end do
-      do i = 0, nt - 3
-         do j = 0, np - 1
-            a = i * np + j
-            b = i * np + mod(j + 1, np)
-            c = (i + 1) * np + mod(j + 1, np)
-            d = (i + 1) * np + j
-            write (unit, '(4(i0,1x),a)') a, b, c, d, "-1"
-         end do
-      end do
-      do j = 0, np - 1
-         write (unit, '(3(i0,1x),a)') (nt - 2) * np + j, (nt - 2) * np + mod(j + 1, np), south, "-1"
-      end do
-      write (unit, '(a)') "    ] } }"
-   end subroutine write_mesh
+      write (unit, '(3(i0,1x),"-1")') (north, off + mod(j + 1, np), off + j, j = 0, np - 1)
+      write (unit, '(4(i0,1x),"-1")') ((off + i * np + j, off + i * np + mod(j + 1, np), &
+                                        off + (i + 1) * np + mod(j + 1, np), off + (i + 1) * np + j, &
+                                        j = 0, np - 1), i = 0, nt - 3)
+      write (unit, '(3(i0,1x),"-1")') (off + (nt - 2) * np + j, off + (nt - 2) * np + mod(j + 1, np), south, &
+                                       j = 0, np - 1)
+   end subroutine write_faces
 end module anm_io_vrml
