@@ -32,6 +32,7 @@ module anm_io_vrml
 
    !> Vertices of one tessellated surface in its body frame (3, nvert).
    type :: body_mesh_type
+      !> Vertices (3, nvert), shape units.
       real(wp), allocatable :: v(:, :)
    end type body_mesh_type
 
