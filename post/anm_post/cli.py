@@ -459,7 +459,7 @@ def _add_export_voxels(sub) -> None:
                                    "sieves, then the shell layers) and the particle id, from the slicing kernel "
                                    "(stacked z slices). Formats: h5 (/labels, /particle_id, attributes voxel_size "
                                    "and codes), raw (uint8 x fastest, header FILE.txt), vcctl (VCCTL's ASCII "
-                                   "image). Prints the volume fraction of every code. docs/slicing.md.",
+                                   "image). Prints the volume fraction of every code. docs/paraview.md.",
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("model", help="model file written by `anm run` (.h5)")
     p.add_argument("--voxel", type=float, required=True, metavar="MM", help="voxel edge in mm")
@@ -490,7 +490,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of anm-post."""
     parser = argparse.ArgumentParser(
         prog="anm-post",
-        description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
+        description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies, "
+                    "VTK exports for ParaView and labelled 3D voxel images.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep,export,voxels}")
 
