@@ -1,11 +1,15 @@
 """VRML and ParaView exports read by VTK (issue 17, items 1 and 2).
 
-- The default job's VRML (one file per layer, and a single file of a small job) imported with VTK's
-  own importer (vtkVRMLImporter, what ParaView uses): one actor per sieve and per shell layer, its
+- The default job's VRML in the flat layout (`vrml_layout = 'flat'`; one file per layer, and a
+  single file of a small job) imported with VTK's own importer (vtkVRMLImporter, what ParaView
+  uses; linear in the particles for this layout): one actor per sieve and per shell layer, its
   colour the sieve's (anm's palette) or the layer's with opacity 0.4 (the file says transparency
   0.6: with `.6` VTK read 0), as many closed surfaces (connected regions) as the model file has
   particles of that sieve, the tessellation's vertex count per particle, and each particle's
   vertices around its centre in the model file.
+- The instanced layout (the default: one Transform + USE per surface) of a small job imported by
+  VTK: one actor per particle and per shell surface, each with its sieve's or layer's colour (leading
+  zeros read) around its particle's centre; the default job's instanced file stays small (< 30 MB).
 - `anm-post export` in vtu (read by meshio and VTK), vtp and vtkhdf (read by VTK's readers):
   centres and fields against the model file, surface cells per particle, shell layers.
 """
@@ -38,16 +42,17 @@ def _run(anm_bin, folder: pathlib.Path, text: str) -> None:
 
 @pytest.fixture(scope="module")
 def default_job(anm_bin, tmp_path_factory):
-    """The default job with one VRML file per layer (default tessellation)."""
+    """The default job with one VRML file per layer (default tessellation), flat layout."""
     out = tmp_path_factory.mktemp("default")
     text = (ROOT / "inputs" / "default.nml").read_text().replace("directory = 'out'", f"directory = '{out}'")
-    text = text.replace("vrml = .true.", "vrml = .true., vrml_per_layer = .true.")
+    text = text.replace("vrml = .true.", "vrml = .true., vrml_per_layer = .true., vrml_layout = 'flat'")
     _run(anm_bin, out, text)
     return out
 
 
-def import_vrml(path: pathlib.Path) -> list:
-    """(diffuse colour, opacity, polydata) of every actor vtkVRMLImporter makes of the file."""
+def import_vrml(path: pathlib.Path, centres: bool = False) -> list:
+    """(diffuse colour, opacity, polydata) of every actor vtkVRMLImporter makes of the file, and
+    with `centres` the world centre of the actor's bounds (its Transform applied) last."""
     win = vtk.vtkRenderWindow()
     win.SetOffScreenRendering(1)
     ren = vtk.vtkRenderer()
@@ -62,7 +67,8 @@ def import_vrml(path: pathlib.Path) -> list:
     for _ in range(actors.GetNumberOfItems()):
         a = actors.GetNextActor()
         pd = a.GetMapper().GetInput()
-        out.append((np.array(a.GetProperty().GetDiffuseColor()), a.GetProperty().GetOpacity(), pd))
+        item = (np.array(a.GetProperty().GetDiffuseColor()), a.GetProperty().GetOpacity(), pd)
+        out.append(item + (np.array(a.GetCenter()),) if centres else item)
     return out
 
 
@@ -76,7 +82,7 @@ def regions(pd) -> int:
 
 def surfaces(actors):
     """Actors with polygons (the box is a line set)."""
-    return [(c, o, pd) for c, o, pd in actors if pd.GetNumberOfPolys() > 0]
+    return [a for a in actors if a[2].GetNumberOfPolys() > 0]
 
 
 def nvert(tess: int) -> int:
@@ -118,8 +124,8 @@ def test_default_vrml_per_layer_imports_with_vtk(default_job):
 
 def test_single_vrml_file_of_a_small_job(anm_bin, tmp_path):
     text = (ROOT / "inputs" / "default.nml").read_text().replace("directory = 'out'", f"directory = '{tmp_path}'")
-    text = text.replace("length = 20.0, 20.0, 20.0", "length = 9.0, 9.0, 9.0").replace("vrml = .true.",
-                                                                                       "vrml = .true., tessellation = 8, 6, 5, 4")
+    text = text.replace("length = 20.0, 20.0, 20.0", "length = 9.0, 9.0, 9.0").replace(
+        "vrml = .true.", "vrml = .true., tessellation = 8, 6, 5, 4, vrml_layout = 'flat'")
     _run(anm_bin, tmp_path, text)
     model = read_model(tmp_path / "default.h5")
     text = (tmp_path / "default.wrl").read_text()
@@ -130,6 +136,44 @@ def test_single_vrml_file_of_a_small_job(anm_bin, tmp_path):
     check_particles(particles, model, [8, 6, 5, 4][:model.n_sieves])
     assert len(shells) == 1 and shells[0][1] == pytest.approx(0.4, abs=1e-3)
     assert regions(shells[0][2]) == model.n_particles
+
+
+def test_instanced_vrml_of_a_small_job_imports_with_vtk(anm_bin, tmp_path):
+    """The default layout: one actor per Transform, particles first (model order) then the shell
+    surfaces; colours not black and shells translucent (the leading zeros read), each actor around
+    its particle's centre."""
+    text = (ROOT / "inputs" / "default.nml").read_text().replace("directory = 'out'", f"directory = '{tmp_path}'")
+    text = text.replace("length = 20.0, 20.0, 20.0", "length = 9.0, 9.0, 9.0").replace(
+        "vrml = .true.", "vrml = .true., tessellation = 8, 6, 5, 4")
+    _run(anm_bin, tmp_path, text)
+    model = read_model(tmp_path / "default.h5")
+    text = (tmp_path / "default.wrl").read_text()
+    assert "USE M" in text and " .5" not in text and " .6" not in text
+    got = surfaces(import_vrml(tmp_path / "default.wrl", centres=True))
+    n = model.n_particles
+    assert len(got) == 2 * n
+    tess = [8, 6, 5, 4]
+    for p, (colour, opacity, pd, centre) in enumerate(got[:n]):
+        s = model.sieve[p]
+        assert np.allclose(colour, PALETTE[s], atol=1e-4), (p, colour)
+        assert opacity == pytest.approx(1.0)
+        assert pd.GetNumberOfPoints() == nvert(tess[s])
+        assert np.linalg.norm(centre - model.center[p]) < 0.5 * model.sieves["max_width"][s]
+    layer_colour = got[n][0]
+    assert layer_colour.max() > 0.5
+    for p, (colour, opacity, pd, centre) in enumerate(got[n:]):
+        assert np.allclose(colour, layer_colour) and opacity == pytest.approx(0.4, abs=1e-3)
+        assert np.linalg.norm(centre - model.center[p]) < 0.5 * model.sieves["max_width"][model.sieve[p]]
+
+
+def test_default_job_instanced_vrml_stays_small(anm_bin, tmp_path):
+    """The default layout keeps the default job's single VRML file small (8.7 MB; flat: 278 MB)."""
+    text = (ROOT / "inputs" / "default.nml").read_text().replace("directory = 'out'", f"directory = '{tmp_path}'")
+    _run(anm_bin, tmp_path, text)
+    size = (tmp_path / "default.wrl").stat().st_size
+    assert 1e6 < size < 30e6, size
+    head = (tmp_path / "default.wrl").read_text()[:2000]
+    assert "instanced layout" in head and "Transform" in head
 
 
 # -- anm-post export ----------------------------------------------------------------------------
