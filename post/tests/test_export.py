@@ -260,24 +260,26 @@ def test_export_surface_points_are_the_model_surfaces(default_job, tmp_path):
         assert np.allclose(got, want, atol=1e-4)
 
 
-def test_castle_reads_the_vrml(anm_bin, tmp_path):
+@pytest.mark.parametrize("layout", ["flat", "instanced"])
+def test_castle_reads_the_vrml(anm_bin, tmp_path, layout):
     """view3dscene's engine (Castle Game Engine, Debian package view3dscene: its converter
-    tovrmlx3d parses the file as view3dscene does) reads the flattened layout: one IndexedFaceSet
-    per sieve and per layer, with their colours and the layer's transparency."""
+    tovrmlx3d parses the file as view3dscene does) reads both layouts with the sieves' colours and
+    the layer's transparency; the flat one has one IndexedFaceSet per sieve and per layer."""
     import shutil
     tool = shutil.which("tovrmlx3d")
     if tool is None:
         pytest.skip("tovrmlx3d (Debian package view3dscene) is not installed")
     text = (ROOT / "inputs" / "default.nml").read_text().replace("directory = 'out'", f"directory = '{tmp_path}'")
     text = text.replace("length = 20.0, 20.0, 20.0", "length = 8.0, 8.0, 8.0").replace(
-        "vrml = .true.", "vrml = .true., tessellation = 6, 5, 4, 4")
+        "vrml = .true.", f"vrml = .true., tessellation = 6, 5, 4, 4, vrml_layout = '{layout}'")
     _run(anm_bin, tmp_path, text)
     model = read_model(tmp_path / "default.h5")
     res = subprocess.run([tool, str(tmp_path / "default.wrl"), "--encoding", "classic"], capture_output=True,
                          text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     out = res.stdout
-    assert out.count("IndexedFaceSet") == len(np.unique(model.sieve)) + 1
+    if layout == "flat":
+        assert out.count("IndexedFaceSet") == len(np.unique(model.sieve)) + 1
     import re
     colours = np.array([[float(x) for x in m.split()] for m in re.findall(r"diffuseColor ([0-9.e+-]+ [0-9.e+-]+ "
                                                                            r"[0-9.e+-]+)", out)])
