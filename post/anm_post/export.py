@@ -121,21 +121,21 @@ def surface_mesh(model: Model, tessellation=None, shells=None, progress=None) ->
     points = np.empty((total, 3), np.float32)
     points[:n] = model.center
     # body-frame vertices per key, then all instances of the key at once
-    form = slicer._form
+    form = slicer.particle_form_ids()
     if nlayer:
-        tsu = np.round(slicer._shell_shape_units(np.arange(n)), 12)
+        tsu = np.round(slicer.shell_distances(np.arange(n)), 12)
     keys: dict[tuple, list[int]] = {}
     for j, (p, layer) in enumerate(zip(inst_p, inst_l)):
         extra = tuple(tsu[p]) if layer else ()
         keys.setdefault((int(form[p]), int(tess_of[p]), int(layer), extra), []).append(j)
     if nlayer:  # every shell surface built in one kernel call (OpenMP inside)
-        slicer._build_shells({(f, extra) for (f, _, layer, extra) in keys if layer})
+        slicer.prepare_shells(np.flatnonzero(shelled))
     done = 0
     for (f, tess, layer, _), js in keys.items():
         js = np.asarray(js)
         dirs = sphere_directions(tess)
         if layer == 0:
-            shape, order = slicer._pairs[f]
+            shape, order = slicer.form_pairs()[f]
             r = kernels.sh_radius(model.shape_coeffs, model.shape_nmax, int(shape), int(order), dirs)
         else:
             a, b, orders, _ = slicer.layer_forms(int(inst_p[js[0]]))
