@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Install what Anm needs, only what is missing; quick (about a second) when nothing is.
 #   Debian packages: gfortran libhdf5-dev liblapack-dev pkg-config
-#   PyPI (pinned):   setuptools fpm numpy h5py matplotlib meson ninja pytest, and the post/ package itself
+#   PyPI (pinned):   setuptools fpm numpy h5py matplotlib meson ninja pytest meshio vtk, and the post/ package itself
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 
 apt_packages=(gfortran libhdf5-dev liblapack-dev pkg-config)
-pip_pins=(setuptools==84.2.1 fpm==0.12.0 numpy==2.4.6 h5py==3.16.0 matplotlib==3.11.2 meson==1.12.1 ninja==1.13.2 pytest==9.2.0)
+pip_pins=(setuptools==84.2.1 fpm==0.12.0 numpy==2.4.6 h5py==3.16.0 matplotlib==3.11.2 meson==1.12.1 ninja==1.13.2 pytest==9.2.0 meshio==5.3.5 vtk==9.7.1)
 
 missing=()
 for p in "${apt_packages[@]}"; do

@@ -5,7 +5,7 @@ module test_config
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_config_job, only: run_config_type, read_config, write_config, placement, contact_method, shell_mode, &
-      & thickness_unit
+      & thickness_unit, vrml_layout
    use anm_shells_thickness, only: thickness_to_mm, thickness_to_shape_units
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
@@ -112,7 +112,8 @@ contains
       call read_config(tmpdir//"/enums-default.nml", cfg, error)
       if (allocated(error)) return
       call check(error, cfg%parking%placement == placement%uniform .and. cfg%parking%contact_method == contact_method%eob &
-                 .and. cfg%shells%unit == thickness_unit%fraction_of_length .and. cfg%shells%nlayer == 0, "defaults")
+                 .and. cfg%shells%unit == thickness_unit%fraction_of_length .and. cfg%shells%nlayer == 0 &
+                 .and. cfg%output%vrml_layout == vrml_layout%instanced, "defaults")
    end subroutine test_enumerators
 
    subroutine test_dump_round_trip(error)
@@ -124,7 +125,8 @@ contains
                       //"&synthetic count = 7, nmax = 12, rough_c = 0.1 /"//nl &
                       //"&parking max_locations = 99, placement = 'void', certified = .false. /"//nl &
                       //"&shells nlayer = 2, thickness = 0.01, 0.03, mode = 'overlap' /"//nl &
-                      //"&output directory = 'out/x''y', name = 'm', vrml = .false., tessellation = 12 /"//nl &
+                      //"&output directory = 'out/x''y', name = 'm', vrml = .false., tessellation = 12," &
+                      //" vrml_layout = 'Flat' /"//nl &
                       //"&run seed = 123456789012 /")
       call read_config(tmpdir//"/dump-in.nml", a, error)
       if (allocated(error)) return
@@ -148,7 +150,8 @@ contains
                  .and. all(b%shells%colour == a%shells%colour), "shells")
       if (allocated(error)) return
       call check(error, trim(b%output%directory) == "out/x'y" .and. .not. b%output%vrml &
-                 .and. all(b%output%tessellation == a%output%tessellation), "output")
+                 .and. all(b%output%tessellation == a%output%tessellation) &
+                 .and. b%output%vrml_layout == vrml_layout%flat, "output")
       if (allocated(error)) return
       call check(error, b%run%seed == 123456789012_i8, "seed")
    end subroutine test_dump_round_trip

@@ -22,6 +22,8 @@ EPILOG = """examples:
   anm-post plot next.csv -o next.png                  plot of `anm study next|nbox ... --csv next.csv`
   anm-post rdf out/msand/model.h5 --density 1 --volume --csv g.csv --png g.png   wall effect g(t), slices and 3D
   anm-post convergence out/msand/model.h5 --densities 0.01,0.1,0.5,1 --csv conv.csv --png conv.png
+  anm-post export out/default.h5 --format vtkhdf --output out/default.vtkhdf   surfaces + centres for ParaView
+  anm-post voxels out/default.h5 --voxel 0.1 --output out/default-voxels.h5   labelled 3D image (also raw, vcctl)
 """
 
 
@@ -353,6 +355,151 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- export and voxels (issue 17, items 2 and 3): self-contained, each writes its own outputs -----
+
+def _own_shells(args: argparse.Namespace):
+    """ShellSpec of --shells/--shell-unit/--shell-particles of export and voxels (None without)."""
+    from .slicing import ShellSpec
+    if not args.shells:
+        return None
+    ids = None
+    if args.shell_particles:
+        try:
+            ids = tuple(int(x) for x in args.shell_particles.split(","))
+        except ValueError:
+            raise AnmPostError(f"--shell-particles: expected comma-separated ids, got {args.shell_particles!r}") \
+                from None
+    try:
+        return ShellSpec(_floats(args.shells, "--shells"), unit=args.shell_unit, particles=ids)
+    except AnmPostError as exc:
+        raise AnmPostError(f"--shells/--shell-particles: {exc}") from None
+
+
+def _own_output(args: argparse.Namespace, outputs, path: str, option: str = "--output") -> Path:
+    """Check an output of export/voxels up front (anm_post.output) and refuse the model file."""
+    out = outputs.add(path, option)
+    model = Path(args.model)
+    if out.exists() and model.exists() and os.path.samefile(out, model):
+        raise AnmPostError(f"{out}: {option} would overwrite an input file of this command")
+    return out
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from .export import FORMATS, estimate_bytes, surface_mesh, write_mesh
+    from .model import read_model
+    from .output import OutputSet
+    from .resources import check_memory
+    from .voxels import stderr_progress
+
+    fmt = args.format or next((f for f, suf in FORMATS.items() if args.out_file.endswith(suf)), None)
+    if fmt is None:
+        raise AnmPostError(f"{args.out_file}: --format not given and the suffix is not .vtu, .vtp or .vtkhdf")
+    tess = [int(x) for x in _floats(args.tessellation, "--tessellation")] if args.tessellation else None
+    with OutputSet() as outputs:
+        out = _own_output(args, outputs, args.out_file)
+        model = read_model(args.model)
+        shells = _own_shells(args)
+        from .export import default_tessellation
+        t = tess or default_tessellation(model.n_sieves)
+        if len(t) not in (1, model.n_sieves) or min(t) < 2:
+            raise AnmPostError(f"--tessellation: one value >= 2 per sieve ({model.n_sieves}) or one for all, got {t}")
+        t = t * model.n_sieves if len(t) == 1 else t
+        check_memory(estimate_bytes(model, t, 0 if shells is None else len(shells.thickness)),
+                     f"surfaces of {model.n_particles} particles at tessellation {','.join(map(str, t))}",
+                     "--tessellation")
+        try:
+            mesh = surface_mesh(model, t, shells, progress=stderr_progress("surfaces"))
+        except AnmPostError as exc:
+            raise AnmPostError(f"--shells/--tessellation: {exc}") from None
+        write_mesh(mesh, outputs.stage(out, "--output"), fmt)
+    print(f"{out}: {fmt}, {mesh.n_particles} particles, {mesh.n_surfaces} surfaces, {len(mesh.points)} points, "
+          f"{mesh.n_cells} cells (tessellation {','.join(map(str, t))})")
+    return 0
+
+
+#: Suffix -> voxel output format.
+VOXEL_SUFFIXES = {".h5": "h5", ".hdf5": "h5", ".raw": "raw", ".img": "vcctl", ".vcctl": "vcctl"}
+
+
+def _cmd_voxels(args: argparse.Namespace) -> int:
+    from .model import read_model
+    from .output import OutputSet
+    from .resources import check_memory
+    from .voxels import (default_chunk, grid_shape, memory_bytes, raw_header, save_h5, save_raw, save_vcctl,
+                         stderr_progress, voxelize)
+
+    fmt = args.format or VOXEL_SUFFIXES.get(Path(args.out_file).suffix.lower())
+    if fmt is None:
+        raise AnmPostError(f"{args.out_file}: --format not given and the suffix is not .h5, .raw or .img")
+    with OutputSet() as outputs:
+        out = _own_output(args, outputs, args.out_file)
+        header = _own_output(args, outputs, str(out) + ".txt", "--output (header)") if fmt == "raw" else None
+        model = read_model(args.model)
+        shells = _own_shells(args)
+        shape = grid_shape(model, args.voxel)
+        check_memory(memory_bytes(shape, default_chunk(shape)), f"a voxel image of {shape[0]} x {shape[1]} x "
+                     f"{shape[2]} voxels", "--voxel")
+        try:
+            img = voxelize(model, args.voxel, shells, progress=stderr_progress("voxels"))
+        except AnmPostError as exc:
+            raise AnmPostError(f"--shells: {exc}") from None
+        if fmt == "h5":
+            save_h5(img, outputs.stage(out, "--output"), str(model.path))
+        elif fmt == "raw":
+            save_raw(img, outputs.stage(out, "--output"))
+            with open(outputs.stage(header, "--output (header)"), "w", encoding="utf-8") as fh:
+                fh.write(raw_header(img, out.name))
+        else:
+            save_vcctl(img, outputs.stage(out, "--output"))
+    nx, ny, nz = img.shape
+    print(f"{out}: {fmt}, {nx} x {ny} x {nz} voxels of {img.voxel:g} mm in {img.seconds:.1f} s"
+          + (f" (header {header})" if header else ""))
+    print("code,phase,volume_fraction")
+    for c, (name, f) in enumerate(zip(img.codes, img.fractions())):
+        print(f"{c},{name},{f:.6f}")
+    return 0
+
+
+def _own_shell_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--shells", metavar="T1[,T2..]",
+                   help="grow shells: cumulative outer distances of the layers from the surface")
+    p.add_argument("--shell-unit", choices=["fraction", "mm"], default="fraction",
+                   help="unit of --shells: fraction of each particle's length (default) or mm")
+    p.add_argument("--shell-particles", metavar="ID[,ID..]", help="grow shells only around these 0-based particles")
+
+
+def _add_export_voxels(sub) -> None:
+    p = sub.add_parser("export", help="particle surfaces and centres for ParaView/VTK (vtu, vtp, vtkhdf)",
+                       description="Write every particle surface (latitude-longitude tessellation per sieve, as "
+                                   "the VRML; triangles and quads) and, with --shells, every shell layer's outer "
+                                   "surface, plus the particle centres as vertex cells, with cell fields "
+                                   "particle_id, sieve, shape, layer (0 = particle) and kind (0 centre, 1 surface). "
+                                   "docs/paraview.md.",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", help="model file written by `anm run` (.h5)")
+    p.add_argument("--output", dest="out_file", required=True, metavar="FILE", help="output file")
+    p.add_argument("--format", choices=["vtu", "vtp", "vtkhdf"], help="default: from the suffix of FILE")
+    p.add_argument("--tessellation", metavar="T[,T..]",
+                   help="polar divisions per sieve (or one for all); default anm's VRML one (32 for the first "
+                        "sieve, coarser after); use e.g. 6,6,3 for M_sand-sized models")
+    _own_shell_options(p)
+    p.set_defaults(func=_cmd_export)
+
+    p = sub.add_parser("voxels", help="labelled 3D voxel image (HDF5, raw stack, VCCTL ASCII)",
+                       description="Label every voxel centre of the box with a phase code (0 matrix, 1.. the "
+                                   "sieves, then the shell layers) and the particle id, from the slicing kernel "
+                                   "(stacked z slices). Formats: h5 (/labels, /particle_id, attributes voxel_size "
+                                   "and codes), raw (uint8 x fastest, header FILE.txt), vcctl (VCCTL's ASCII "
+                                   "image). Prints the volume fraction of every code. docs/paraview.md.",
+                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", help="model file written by `anm run` (.h5)")
+    p.add_argument("--voxel", type=float, required=True, metavar="MM", help="voxel edge in mm")
+    p.add_argument("--output", dest="out_file", required=True, metavar="FILE", help="output file")
+    p.add_argument("--format", choices=["h5", "raw", "vcctl"], help="default: from the suffix (.h5, .raw, .img)")
+    _own_shell_options(p)
+    p.set_defaults(func=_cmd_voxels)
+
+
 def _rdf_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model file written by `anm run` (.h5)")
     p.add_argument("--particle", type=int, metavar="ID", help="0-based id of the RDF particle (default: the longest)")
@@ -375,12 +522,13 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of anm-post."""
     parser = argparse.ArgumentParser(
         prog="anm-post",
-        description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies.",
+        description="Post-processing of Anm model files: tables, 2D slices (label images), plots of studies, "
+                    "VTK exports for ParaView and labelled 3D voxel images.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     from . import __version__
     parser.add_argument("--version", action="version", version=f"anm-post {__version__}",
                         help="print the version (that of the anm program, fpm.toml) and exit")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{table,slice,plot,rdf,convergence,sweep,export,voxels}")
 
     p = sub.add_parser("table", help="PSD table of a model file, or a geometry table of `anm shape`",
                        description="With a model file (.h5): the PSD table (per sieve: width range, target and "
@@ -466,6 +614,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="shell volume fraction panel (Fig 2.17): shown by default when the runs have shells; "
                         "`--shells` or `--shells model` always, `--shells none` never")
     p.set_defaults(func=_cmd_sweep)
+    _add_export_voxels(sub)
     return parser
 
 

@@ -223,6 +223,30 @@ class Slicer:
         """Length L (shape units) of every (shape, order) form."""
         return self.geometry()[:, kernels.GEOMETRY_COLUMNS.index("length")]
 
+    def particle_form_ids(self) -> np.ndarray:
+        """Form index (a row of form_pairs) of every particle."""
+        return self._form
+
+    def form_pairs(self) -> np.ndarray:
+        """(shape, order) of every form (nform, 2): each shape at each order the model uses."""
+        return self._pairs
+
+    def shell_distances(self, ids) -> np.ndarray:
+        """Cumulative layer distances (len(ids), nlayer) of particles ids in shape units (quantised
+        for mm), as slicing grows the shells."""
+        if self.shells is None:
+            raise AnmPostError("shell_distances needs a Slicer with shells")
+        return self._shell_shape_units(np.asarray(ids))
+
+    def prepare_shells(self, ids) -> None:
+        """Build the shell surfaces of particles ids in one kernel call (cached; layer_forms then
+        reuses them)."""
+        ids = np.asarray(ids, dtype=int)
+        if self.shells is None or ids.size == 0:
+            return
+        tsu = np.round(self._shell_shape_units(ids), 12)
+        self._build_shells({(int(self._form[p]), tuple(t)) for p, t in zip(ids, tsu)})
+
     def layer_forms(self, pid: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The surfaces slicing uses for particle pid and its shell layers, as forms: a, b (lmax+1,
         lmax+1, 1 + nlayer), orders (1 + nlayer,), bounds (8, 1 + nlayer); form 0 is the particle,

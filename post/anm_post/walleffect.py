@@ -174,13 +174,13 @@ def _write_csv(path: str | Path, rows: list[dict], option: str) -> Path:
 def particle_lengths(model: Model, slicer: Slicer | None = None) -> np.ndarray:
     """Length L (mm) of every particle."""
     slicer = slicer or Slicer(model)
-    return slicer.lengths()[slicer._form] * model.scale
+    return slicer.lengths()[slicer.particle_form_ids()] * model.scale
 
 
 def particle_volumes(model: Model, slicer: Slicer | None = None) -> np.ndarray:
     """Volume (mm^3) of every particle (its expansion at the order used)."""
     slicer = slicer or Slicer(model)
-    return slicer.geometry()[slicer._form, kernels.GEOMETRY_COLUMNS.index("volume")] * model.scale ** 3
+    return slicer.geometry()[slicer.particle_form_ids(), kernels.GEOMETRY_COLUMNS.index("volume")] * model.scale ** 3
 
 
 def small_sieves(model: Model, spec: RdfSpec) -> tuple[int, ...]:

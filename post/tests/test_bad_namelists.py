@@ -81,6 +81,11 @@ def test_line_of_a_range_error_is_named(anm_bin, tmp_path):
     refused(anm_bin, tmp_path, text, "bad.nml:8: &parking: n_box = 1 must be >= 2")
 
 
+def test_unknown_vrml_layout_is_named(anm_bin, tmp_path):
+    text = GOOD.replace("vrml = .false. /", "vrml = .true.,\n  vrml_layout = 'flattened' /")
+    refused(anm_bin, tmp_path, text, "bad.nml:5: &output: vrml_layout = 'flattened' must be 'instanced' or 'flat'")
+
+
 def test_model_file_is_not_a_namelist(anm_bin, tmp_path):
     import h5py
     path = tmp_path / "model.h5"

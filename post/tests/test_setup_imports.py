@@ -26,6 +26,9 @@ IMPORT_TO_PACKAGE = {
     "setuptools": "setuptools",
     "pkg_resources": "setuptools",
     "fpm": "fpm",
+    "meshio": "meshio",
+    "vtk": "vtk",
+    "vtkmodules": "vtk",
 }
 
 

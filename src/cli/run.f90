@@ -333,7 +333,8 @@ contains
          end if
          call set%add(name, tmp)
          call write_vrml_file(tmp, model%box, meshes, mesh_of, model%center(:, inst_of), &
-                              model%rotation(:, :, inst_of), model%scale(inst_of), error, shown=name)
+                              model%rotation(:, :, inst_of), model%scale(inst_of), error, shown=name, &
+                              layout=cfg%output%vrml_layout)
          if (allocated(error)) return
          deallocate (mesh_of, inst_of)
       end do

@@ -34,7 +34,7 @@ module anm_config_job
       & contact_method
    use anm_config_shells, only: shells_config_type, load_shells_config, dump_shells_config, shell_mode, &
       & thickness_unit, max_layers
-   use anm_config_output, only: output_config_type, load_output_config, dump_output_config
+   use anm_config_output, only: output_config_type, load_output_config, dump_output_config, vrml_layout
    use anm_config_run, only: run_group_config_type, load_run_group_config, dump_run_group_config
    implicit none
    private
@@ -42,7 +42,7 @@ module anm_config_job
    public :: run_config_type, read_config, write_config, known_groups
    public :: box_config_type, sieves_config_type, synthetic_config_type, parking_config_type, shells_config_type, &
       & output_config_type, run_group_config_type
-   public :: placement, contact_method, shell_mode, thickness_unit, max_sieves, max_layers
+   public :: placement, contact_method, shell_mode, thickness_unit, max_sieves, max_layers, vrml_layout
 
    !> The namelist groups the program knows, in reading order.
    character(len=9), parameter :: known_groups(7) = [character(len=9) :: "box", "sieves", "synthetic", &

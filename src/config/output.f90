@@ -3,20 +3,23 @@
 !>     &output directory = 'out', name = 'default', vrml = .true. /
 !>
 !> Validates: name non-empty without '/'; directory non-empty; tessellation per sieve -1
-!> (default: finer for larger sieves) or 4..400, none listed beyond nsieve.
+!> (default: finer for larger sieves) or 4..400, none listed beyond nsieve; vrml_layout
+!> 'instanced' or 'flat' (resolved to `vrml_layout%...`).
 !>
 !> Usage:
 !>     call load_output_config(output, nml, nsieve, error)
 module anm_config_output
    use anm_core_error, only: error_type
-   use anm_core_strings, only: to_string
+   use anm_core_strings, only: to_string, to_lower
    use anm_config_namelist, only: namelist_file_type, find_group, config_error, group_read_error, max_line
    use anm_config_format, only: logical_text, quoted
    use anm_config_sieves, only: max_sieves
+   use anm_io_vrml, only: vrml_layout, vrml_layout_name
    implicit none
    private
 
-   public :: output_config_type, load_output_config, dump_output_config, default_tessellation
+   public :: output_config_type, load_output_config, dump_output_config, default_tessellation, vrml_layout, &
+      & vrml_layout_name
 
    !> The outputs.
    type :: output_config_type
@@ -30,6 +33,8 @@ module anm_config_output
       integer, allocatable :: tessellation(:)
       !> Overwrite existing outputs (otherwise `anm run` refuses, naming the file; `--force`).
       logical :: overwrite = .false.
+      !> VRML file layout, one of `vrml_layout` (instanced: small; flat: linear import in VTK).
+      integer :: vrml_layout = vrml_layout%instanced
    end type output_config_type
 
 contains
@@ -48,7 +53,8 @@ contains
       character(len=128) :: name
       logical :: vrml, vrml_per_layer, overwrite
       integer :: tessellation(max_sieves)
-      namelist /output/ directory, name, vrml, vrml_per_layer, tessellation, overwrite
+      character(len=32) :: vrml_layout
+      namelist /output/ directory, name, vrml, vrml_per_layer, tessellation, overwrite, vrml_layout
       integer :: ig, stat, i
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -59,6 +65,7 @@ contains
       vrml_per_layer = self%vrml_per_layer
       overwrite = self%overwrite
       tessellation = -1
+      vrml_layout = vrml_layout_name(self%vrml_layout)
       ig = find_group(nml, "output")
       if (ig > 0) then
          lines = nml%groups(ig)%lines
@@ -92,6 +99,16 @@ contains
             self%tessellation(i) = tessellation(i)
          end if
       end do
+      select case (to_lower(trim(vrml_layout)))
+      case ("instanced")
+         self%vrml_layout = layout_instanced()
+      case ("flat")
+         self%vrml_layout = layout_flat()
+      case default
+         call config_error(error, nml, ig, "output", "vrml_layout", "= '"//trim(vrml_layout) &
+                           //"' must be 'instanced' or 'flat'")
+         return
+      end select
       self%directory = directory
       self%name = name
       self%vrml = vrml
@@ -107,6 +124,15 @@ contains
          read (lines, nml=output, iostat=stat, iomsg=msg)
       end subroutine reader
    end subroutine load_output_config
+
+   ! the local namelist variable vrml_layout shadows the enumerator inside load_output_config
+   pure integer function layout_instanced() result(k)
+      k = vrml_layout%instanced
+   end function layout_instanced
+
+   pure integer function layout_flat() result(k)
+      k = vrml_layout%flat
+   end function layout_flat
 
    !> Default VRML tessellation: finer for the first (largest) sieves.
    pure function default_tessellation(i, n) result(t)
@@ -128,6 +154,6 @@ contains
       do i = 1, size(self%tessellation)
          text = text//", tessellation("//to_string(i)//") = "//to_string(self%tessellation(i))
       end do
-      text = text//" /"//new_line("a")
+      text = text//", vrml_layout = "//quoted(vrml_layout_name(self%vrml_layout))//" /"//new_line("a")
    end function dump_output_config
 end module anm_config_output
