@@ -178,3 +178,24 @@ def test_two_runs_to_one_output(anm_bin, refs, tmp_path):
         fp = fingerprint(out)
         assert fp in (refs[1]["fp"], refs[2]["fp"]), fp
         assert temporaries(out) == []
+
+
+def test_study_csv_on_a_full_disk(anm_bin, tmpfs, tmp_path):
+    """`anm study` writes its CSV like every other output: on a full disk it fails with a message,
+    the earlier CSV stays byte-identical and no temporary is left."""
+    shape = tmp_path / "sphere-anm-00001.dat"
+    lines = ["0 0 3.5449077018110318 0.0"] + [f"{n} {m} 0.0 0.0" for n in range(1, 5) for m in range(n, -n - 1, -1)]
+    shape.write_text("\n".join(lines) + "\n")
+    out = tmpfs / "study"
+    out.mkdir()
+    csv = out / "next.csv"
+    rc = subprocess.run([anm_bin, "study", "next", str(shape), "--csv", str(csv)], capture_output=True, text=True)
+    assert rc.returncode == 0, rc.stderr
+    earlier = csv.read_bytes()
+    st = os.statvfs(tmpfs)
+    with open(tmpfs / "filler", "wb") as f:
+        f.write(b"\0" * (st.f_bavail * st.f_frsize))
+    res = subprocess.run([anm_bin, "study", "next", str(shape), "--csv", str(csv)], capture_output=True, text=True)
+    assert res.returncode == 1 and "next.csv" in res.stderr and "Backtrace" not in res.stderr, res.stderr
+    assert csv.read_bytes() == earlier
+    assert sorted(os.listdir(out)) == ["next.csv"]

@@ -8,6 +8,7 @@
 module anm_contact_studies
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type, fatal_error, error_code
+   use anm_core_output, only: write_text_file
    use anm_core_random, only: rng_type, new_rng
    use anm_sh_expansion, only: sh_expansion_type
    use anm_geometry_extent, only: extent_scan
@@ -32,22 +33,19 @@ contains
       !> Error naming the file.
       type(error_type), allocatable, intent(out) :: error
       type(contact_body_type) :: body
-      integer :: unit, stat, next
-      character(len=256) :: msg
+      integer :: next
+      character(len=80) :: line
+      character(len=:), allocatable :: text
       real(wp) :: lo(3), hi(3)
       call build(body, shape, nused, error)
       if (allocated(error)) return
-      open (newunit=unit, file=path, status="replace", action="write", iostat=stat, iomsg=msg)
-      if (stat /= 0) then
-         call fatal_error(error, path//": cannot open for writing: "//trim(msg), error_code%io)
-         return
-      end if
-      write (unit, '(a)') "next,v_box,v_box_certified"
+      text = "next,v_box,v_box_certified"//new_line("a")
       do next = 4, 160, 2
          call extent_scan(body%shape, next, lo, hi)
-         write (unit, '(i0,2(",",es16.9))') next, product(hi - lo), product(body%box_hi - body%box_lo)
+         write (line, '(i0,2(",",es16.9))') next, product(hi - lo), product(body%box_hi - body%box_lo)
+         text = text//trim(line)//new_line("a")
       end do
-      close (unit)
+      call write_text_file(path, text, error)
    end subroutine study_next
 
    !> Write `nbox,d_overlap` for N_box = 10..300 for two copies of the particle (random
@@ -67,8 +65,9 @@ contains
       type(contact_body_type) :: body
       type(rng_type) :: rng
       real(wp) :: rota(3, 3), rotb(3, 3), lo, hi, mid, zero(3), ex(3)
-      integer :: unit, stat, nbox, it
-      character(len=256) :: msg
+      integer :: nbox, it
+      character(len=80) :: line
+      character(len=:), allocatable :: text
       call build(body, shape, nused, error)
       if (allocated(error)) return
       call new_rng(rng, int(seed, i8), 1_i8)
@@ -86,17 +85,13 @@ contains
             hi = mid
          end if
       end do
-      open (newunit=unit, file=path, status="replace", action="write", iostat=stat, iomsg=msg)
-      if (stat /= 0) then
-         call fatal_error(error, path//": cannot open for writing: "//trim(msg), error_code%io)
-         return
-      end if
-      write (unit, '(a)') "nbox,d_overlap"
+      text = "nbox,d_overlap"//new_line("a")
       do nbox = 10, 300, 10
-         write (unit, '(i0,",",es16.9)') nbox, overlap_depth(body, zero, rota, 1.0_wp, body, 0.998_wp * lo * ex, &
-                                                              rotb, 1.0_wp, nbox)
+         write (line, '(i0,",",es16.9)') nbox, overlap_depth(body, zero, rota, 1.0_wp, body, 0.998_wp * lo * ex, &
+                                                             rotb, 1.0_wp, nbox)
+         text = text//trim(line)//new_line("a")
       end do
-      close (unit)
+      call write_text_file(path, text, error)
    end subroutine study_nbox
 
    subroutine build(body, shape, nused, error)

@@ -19,7 +19,7 @@ module anm_core_output
    implicit none
    private
 
-   public :: output_set_type, check_writable, ignore_file_size_signal, remove_file, temp_name, &
+   public :: output_set_type, write_text_file, check_writable, ignore_file_size_signal, remove_file, temp_name, &
       & remove_stale_temps, directory_of, temp_tag, check_complete, file_size
 
    !> Marker in temporary file names: FINAL//temp_tag//PID.
@@ -96,6 +96,48 @@ contains
       ! SIG_IGN is the handler address 1
       old = c_signal(sigxfsz, transfer(1_8, c_null_funptr))
    end subroutine ignore_file_size_signal
+
+   !> Write `text` (lines separated by new_line) as the file `path`, safely: to a unique temporary
+   !> in the same folder, every write and the close checked, then renamed; on error the temporary is
+   !> removed, an earlier file is kept and the error names `path`.
+   subroutine write_text_file(path, text, error)
+      !> Final file name.
+      character(len=*), intent(in) :: path
+      !> The whole content.
+      character(len=*), intent(in) :: text
+      !> Error naming the file.
+      type(error_type), allocatable, intent(out) :: error
+      type(output_set_type) :: set
+      character(len=:), allocatable :: tmp
+      character(len=512) :: msg
+      integer :: unit, stat
+      call set%add(path, tmp)
+      open (newunit=unit, file=tmp, access="stream", form="formatted", status="replace", action="write", &
+            iostat=stat, iomsg=msg)
+      if (stat /= 0) then
+         call fatal_error(error, path//": cannot open for writing ("//trim(msg)//")", error_code%io)
+         call set%discard()
+         return
+      end if
+      write (unit, '(a)', advance="no", iostat=stat, iomsg=msg) text
+      if (stat /= 0) then
+         call fatal_error(error, path//": write failed ("//trim(msg)//")", error_code%io)
+      else
+         call check_complete(unit, tmp, path, error)
+      end if
+      if (allocated(error)) then
+         close (unit, iostat=stat)
+         call set%discard()
+         return
+      end if
+      close (unit, iostat=stat, iomsg=msg)
+      if (stat /= 0) then
+         call fatal_error(error, path//": error closing the file ("//trim(msg)//")", error_code%io)
+         call set%discard()
+         return
+      end if
+      call set%commit(error)
+   end subroutine write_text_file
 
    !> Size of a file in bytes as the file system has it (-1 when it cannot be read).
    function file_size(path) result(size)
