@@ -112,6 +112,14 @@ def _shell_spec(args: argparse.Namespace, model, ids):
         raise AnmPostError(f"--shells/--shell-particles: {exc}") from None
 
 
+def _preparing(command: str, model) -> None:
+    """A first progress line for big models, whose preparation (forms, shells, cell list) takes
+    seconds before the first slice: so that a log shows the command is working."""
+    if model.n_particles >= 10_000:
+        print(f"anm-post {command}: preparing the shapes of {model.n_particles} particles", file=sys.stderr,
+              flush=True)
+
+
 def _cmd_slice(args: argparse.Namespace) -> int:
     from .model import read_model
     from .slicing import Slicer
@@ -129,14 +137,23 @@ def _cmd_slice(args: argparse.Namespace) -> int:
                 from None
     shells = _shell_spec(args, model, ids)
     nlayer = 0 if shells is None else len(shells.thickness)
+    _preparing("slice", model)
     try:
         slicer = Slicer(model, shells)
     except AnmPostError as exc:
         raise AnmPostError(f"--shell-particles: {exc}") from None
     if args.density is not None:
         _check_stack_memory(args, model)
+        from .slicing import stack_positions
+        from .voxels import stderr_progress
         try:
-            results = list(slicer.stack(args.axis, args.pixel, args.density))
+            k = "xyz".index(args.axis) if args.axis in ("x", "y", "z") else int(args.axis)
+            total = len(stack_positions(0.0, float(model.box[k]), args.pixel, args.density))
+            report = stderr_progress("slices")
+            results = []
+            for r in slicer.stack(args.axis, args.pixel, args.density):
+                results.append(r)
+                report(len(results), total)
         except AnmPostError as exc:
             raise AnmPostError(f"--density: {exc}") from None
         k = "xyz".index(args.axis)
@@ -258,9 +275,11 @@ def _cmd_rdf(args: argparse.Namespace) -> int:
         raise AnmPostError(f"--replicates: at least 2 are needed for a standard error, got {args.replicates}")
     if args.seed < 0:
         raise AnmPostError(f"--seed: must be >= 0, got {args.seed}")
+    from .voxels import stderr_progress
+    _preparing("rdf", model)
     st = prepare(model, spec)
     _check_rdf_memory(st, spec, [spec.density], args)
-    res = rdf(model, spec, setup=st)
+    res = rdf(model, spec, setup=st, progress=stderr_progress("g(t) slices"))
     vol = volume_fractions(model, spec, spacing=args.spacing, replicates=args.replicates, seed=args.seed,
                            setup=st) if args.volume else None
     print(f"particle {res.particle}: length {res.length:.4g} mm, phi_B {res.phi_b:.4f} (small sieves "
@@ -308,10 +327,12 @@ def _cmd_convergence(args: argparse.Namespace) -> int:
     if not dens or not all(0 < d <= 1 for d in dens):
         raise AnmPostError(f"--densities: slice densities must be in (0, 1], got {args.densities!r}")
     if layers is not None and not all(1 <= k <= spec.n_shells for k in layers):
-        raise AnmPostError(f"--layers: 1-based layers must be in 1..{spec.n_shells} (--shells), got {args.layers!r}")
+        raise AnmPostError(f"--layers: 1-based layers must be in 1..{spec.n_shells} (--bins), got {args.layers!r}")
+    from .voxels import stderr_progress
+    _preparing("convergence", model)
     st = prepare(model, spec)
     _check_rdf_memory(st, spec, dens, args)
-    conv = convergence(model, spec, dens, setup=st)
+    conv = convergence(model, spec, dens, setup=st, progress=stderr_progress("g(t) slices"))
     print(f"{sum(len(r.positions) for r in conv.results)} slices in {conv.results[0].seconds:.1f} s",
           file=sys.stderr)
     print("density,n_slices," + ",".join(f"g{k + 1},sd{k + 1}" for k in range(len(conv.results[0].g))))

@@ -288,8 +288,9 @@ def _planes(st: RdfSetup, spec: RdfSpec, density: float) -> list[Plane]:
     return out
 
 
-def _count(st: RdfSetup, planes: list[Plane], chunk: int = 16) -> np.ndarray:
-    """Pixel counts (nslice, K, 2): layer area, small-particle pixels in it."""
+def _count(st: RdfSetup, planes: list[Plane], chunk: int = 16, progress=None) -> np.ndarray:
+    """Pixel counts (nslice, K, 2): layer area, small-particle pixels in it. `progress(done, total)`
+    is called after each chunk of slices when given."""
     K = len(st.t_mm)
     small_lut = np.zeros(st.full.model.n_sieves + 1, bool)
     small_lut[np.asarray(st.small)] = True
@@ -303,6 +304,8 @@ def _count(st: RdfSetup, planes: list[Plane], chunk: int = 16) -> np.ndarray:
             is_small = small_lut[lb.sieve.ravel()]     # sieve -1 -> last entry (False)
             out[i + j, :, 0] = np.bincount(lay, minlength=K + 1)[1:K + 1]
             out[i + j, :, 1] = np.bincount(lay[is_small], minlength=K + 1)[1:K + 1]
+        if progress:
+            progress(min(i + chunk, len(planes)), len(planes))
     return out
 
 
@@ -344,12 +347,13 @@ def _block(st: "RdfSetup", planes: list[Plane], axis: str) -> int:
     return max(1, int(np.ceil(st.width / spacing - 1e-9)))
 
 
-def rdf(model: Model, spec: RdfSpec = RdfSpec(), setup: RdfSetup | None = None) -> RdfResult:
-    """g(t) of thesis section 3.4 from slices (see the module docstring)."""
+def rdf(model: Model, spec: RdfSpec = RdfSpec(), setup: RdfSetup | None = None, progress=None) -> RdfResult:
+    """g(t) of thesis section 3.4 from slices (see the module docstring); `progress(done, total)`
+    after each chunk of slices when given."""
     t0 = time.perf_counter()
     st = setup or prepare(model, spec)
     planes = _planes(st, spec, spec.density)
-    counts = _count(st, planes)
+    counts = _count(st, planes, progress=progress)
     s = _summarise(counts, st.phi_b, _block(st, planes, spec.axis))
     k = _AXES[spec.axis]
     t_in = np.concatenate([[0.0], st.t_mm[:-1]])
@@ -510,7 +514,7 @@ class ConvergenceResult:
 
 def convergence(model: Model, spec: RdfSpec = RdfSpec(),
                 densities: Sequence[float] = (0.01, 0.05, 0.1, 0.25, 0.5, 1.0),
-                setup: RdfSetup | None = None) -> ConvergenceResult:
+                setup: RdfSetup | None = None, progress=None) -> ConvergenceResult:
     """g(t) at several slice densities (thesis Figs 3.9, 3.10, 3.12, 3.13). The slices of every
     density are a subset of the union labelled once: each plane is labelled once even when several
     densities use it."""
@@ -525,7 +529,7 @@ def convergence(model: Model, spec: RdfSpec = RdfSpec(),
         for p in planes:
             key.setdefault(round(p.origin[_AXES[spec.axis]], 9), p)
     uniq = list(key.values())
-    counts = _count(st, uniq)
+    counts = _count(st, uniq, progress=progress)
     index = {k: i for i, k in enumerate(key)}
     k = _AXES[spec.axis]
     t_in = np.concatenate([[0.0], st.t_mm[:-1]])

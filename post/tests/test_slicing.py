@@ -230,3 +230,13 @@ def test_sh_radius_kernel_matches_numpy():
     dirs = rng.normal(size=(50, 3))
     r = kernels.sh_radius(c[None], np.array([6]), 0, 6, dirs)
     assert np.allclose(r, radius(c, 6, dirs), atol=1e-12)
+
+
+def test_slice_stack_reports_progress(tmp_path):
+    """A stack of slices prints its progress on stderr (percent, slices done of all, time left)."""
+    sphere_model(tmp_path / "p.h5", [[5.0, 5.0, 5.0], [2.0, 2.0, 2.0]], [2.0, 1.0])
+    res = run_cli("slice", str(tmp_path / "p.h5"), "--axis", "z", "--pixel", "0.1", "--density", "0.2",
+                  "--labels", str(tmp_path / "stack.npz"))
+    assert res.returncode == 0, res.stderr
+    lines = [line for line in res.stderr.splitlines() if line.startswith("slices:")]
+    assert lines and "100%" in lines[-1] and "(20/20)" in lines[-1] and "s left" in lines[-1], res.stderr
