@@ -2,6 +2,7 @@
 !> (clear, overlapping, across the periodic boundary, through a wall), and the pruned sampling
 !> against testing every sample on a parked model.
 module test_audit
+   use test_helpers, only: run_nml
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
@@ -9,8 +10,6 @@ module test_audit
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape
    use anm_geometry_rotation, only: random_rotation
-   use anm_config_job, only: run_config_type, read_config
-   use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -30,24 +29,6 @@ contains
                            test_verify_pruning), &
               new_unittest("verify: a small overlap planted in a big parked model is found", test_verify_planted)]
    end subroutine collect_audit
-
-   !> Park the namelist `text` (written to build/test-tmp/name).
-   subroutine run_nml(name, text, model, error)
-      character(len=*), intent(in) :: name, text
-      type(model_type), intent(out) :: model
-      type(error_type), allocatable, intent(out) :: error
-      type(run_config_type) :: cfg
-      type(particle_kind_type), allocatable :: kinds(:)
-      integer, allocatable :: kind_of(:)
-      integer :: unit
-      call execute_command_line("mkdir -p build/test-tmp")
-      open (newunit=unit, file="build/test-tmp/"//name, status="replace", action="write")
-      write (unit, '(a)') text
-      close (unit)
-      call read_config("build/test-tmp/"//name, cfg, error)
-      if (allocated(error)) return
-      call run_parking(cfg, model, kinds, kind_of, error)
-   end subroutine run_nml
 
    !> A model of spheres of radius 1 (shape 1) at the given centres.
    function sphere_model(centers, periodic, box) result(m)

@@ -4,6 +4,7 @@
 !> spheres pass the RSA jamming limit 0.3841, and moves randomise aligned ellipsoids to an
 !> isotropic orientation tensor.
 module test_dense
+   use test_helpers, only: run_nml
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
@@ -16,8 +17,6 @@ module test_dense
    use anm_parking_dense, only: dense_params_type, move_state_type, new_move_state, relax_sweep
    use anm_io_model, only: model_type
    use anm_audit_verify, only: verify_report_type, verify_model
-   use anm_config_job, only: run_config_type, read_config
-   use anm_parking_engine, only: run_parking
    use omp_lib, only: omp_set_num_threads, omp_get_max_threads
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
@@ -250,23 +249,6 @@ contains
       ev(1) = q + 2.0_wp * p * cos(phi + 2.0_wp * acos(-1.0_wp) / 3.0_wp)
       ev(2) = 3.0_wp * q - ev(1) - ev(3)
    end function eigenvalues_sym3
-
-   subroutine run_nml(name, text, model, error)
-      character(len=*), intent(in) :: name, text
-      type(model_type), intent(out) :: model
-      type(error_type), allocatable, intent(out) :: error
-      type(run_config_type) :: cfg
-      type(particle_kind_type), allocatable :: kinds(:)
-      integer, allocatable :: kind_of(:)
-      integer :: unit
-      call execute_command_line("mkdir -p build/test-tmp")
-      open (newunit=unit, file="build/test-tmp/"//name, status="replace", action="write")
-      write (unit, '(a)') text
-      close (unit)
-      call read_config("build/test-tmp/"//name, cfg, error)
-      if (allocated(error)) return
-      call run_parking(cfg, model, kinds, kind_of, error)
-   end subroutine run_nml
 
    subroutine test_beyond_rsa(error)
       type(error_type), allocatable, intent(out) :: error

@@ -2,6 +2,7 @@
 !> sizes differing 1000:1, in periodic and non-periodic boxes, and the parking engine (the audit's
 !> own tests: test_audit).
 module test_parking
+   use test_helpers, only: run_nml
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
@@ -10,8 +11,6 @@ module test_parking
    use anm_audit_verify, only: verify_report_type, verify_model
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_geometry_rotation, only: random_rotation
-   use anm_config_job, only: run_config_type, read_config
-   use anm_parking_engine, only: run_parking, particle_kind_type
    use anm_io_model, only: write_model, read_model
    use omp_lib, only: omp_set_num_threads, omp_get_max_threads
    use anm_testing, only: unittest_type, new_unittest, check
@@ -224,24 +223,6 @@ contains
          if (allocated(error)) return
       end do
    end subroutine test_batches
-
-   subroutine run_nml(name, text, model, error, max_batch)
-      character(len=*), intent(in) :: name, text
-      type(model_type), intent(out) :: model
-      type(error_type), allocatable, intent(out) :: error
-      integer, intent(in), optional :: max_batch
-      type(run_config_type) :: cfg
-      type(particle_kind_type), allocatable :: kinds(:)
-      integer, allocatable :: kind_of(:)
-      integer :: unit
-      call execute_command_line("mkdir -p build/test-tmp")
-      open (newunit=unit, file="build/test-tmp/"//name, status="replace", action="write")
-      write (unit, '(a)') text
-      close (unit)
-      call read_config("build/test-tmp/"//name, cfg, error)
-      if (allocated(error)) return
-      call run_parking(cfg, model, kinds, kind_of, error, max_batch=max_batch)
-   end subroutine run_nml
 
    subroutine test_rsa_spheres(error)
       type(error_type), allocatable, intent(out) :: error
