@@ -145,7 +145,7 @@ def _cmd_slice(args: argparse.Namespace) -> int:
     if args.density is not None:
         _check_stack_memory(args, model)
         from .slicing import stack_positions
-        from .voxels import stderr_progress
+        from .progress import stderr_progress
         try:
             k = "xyz".index(args.axis) if args.axis in ("x", "y", "z") else int(args.axis)
             total = len(stack_positions(0.0, float(model.box[k]), args.pixel, args.density))
@@ -275,7 +275,7 @@ def _cmd_rdf(args: argparse.Namespace) -> int:
         raise AnmPostError(f"--replicates: at least 2 are needed for a standard error, got {args.replicates}")
     if args.seed < 0:
         raise AnmPostError(f"--seed: must be >= 0, got {args.seed}")
-    from .voxels import stderr_progress
+    from .progress import stderr_progress
     _preparing("rdf", model)
     st = prepare(model, spec)
     _check_rdf_memory(st, spec, [spec.density], args)
@@ -328,7 +328,7 @@ def _cmd_convergence(args: argparse.Namespace) -> int:
         raise AnmPostError(f"--densities: slice densities must be in (0, 1], got {args.densities!r}")
     if layers is not None and not all(1 <= k <= spec.n_shells for k in layers):
         raise AnmPostError(f"--layers: 1-based layers must be in 1..{spec.n_shells} (--bins), got {args.layers!r}")
-    from .voxels import stderr_progress
+    from .progress import stderr_progress
     _preparing("convergence", model)
     st = prepare(model, spec)
     _check_rdf_memory(st, spec, dens, args)
@@ -410,7 +410,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from .model import read_model
     from .output import OutputSet
     from .resources import check_memory
-    from .voxels import stderr_progress
+    from .progress import stderr_progress
 
     fmt = args.format or next((f for f, suf in FORMATS.items() if args.out_file.endswith(suf)), None)
     if fmt is None:
@@ -447,7 +447,8 @@ def _cmd_voxels(args: argparse.Namespace) -> int:
     from .output import OutputSet
     from .resources import check_memory
     from .voxels import (default_chunk, grid_shape, memory_bytes, raw_header, save_h5, save_raw, save_vcctl,
-                         stderr_progress, voxelize)
+                         voxelize)
+    from .progress import stderr_progress
 
     fmt = args.format or VOXEL_SUFFIXES.get(Path(args.out_file).suffix.lower())
     if fmt is None:
