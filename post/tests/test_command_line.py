@@ -141,3 +141,26 @@ def test_closing_line_names_the_files_written(anm_bin, tmp_path):
     names = re.findall(r"(\S+\.(?:h5|csv|wrl))", line)
     assert names and all(pathlib.Path(n).is_file() for n in names), line
     assert not (tmp_path / "o" / "m.wrl").exists() and "m.wrl" not in line.replace("-particles.wrl", "")
+
+
+def test_an_earlier_vrml_goes_with_the_set(anm_bin, tmp_path):
+    """A run without VRML into a folder holding an earlier run's VRML of the same name: refused
+    without --force (the file would be removed); with --force the folder ends with this run's
+    set only, and files of other names stay."""
+    with_vrml = write_nml(tmp_path, vrml=".true.")
+    assert anm(anm_bin, "run", with_vrml).returncode == 0
+    out = tmp_path / "out"
+    assert (out / "m.wrl").exists()
+    (out / "m-layer2.wrl").write_text("#VRML V2.0 utf8\n")     # a per-layer file of another run
+    (out / "other.wrl").write_text("#VRML V2.0 utf8\n")        # another name: not ours
+    (out / "m-layerx.wrl").write_text("#VRML V2.0 utf8\n")     # not a name Anm writes
+    without = write_nml(tmp_path, vrml=".false.")
+    for name in ("m.h5", "m-summary.csv"):      # the VRML alone is left of the earlier run
+        (out / name).unlink()
+    res = anm(anm_bin, "run", without)
+    assert res.returncode == 1 and "m-layer2.wrl exists" in res.stderr and "--force" in res.stderr, res.stderr
+    assert (out / "m.wrl").exists()
+    res = anm(anm_bin, "run", without, "--force")
+    assert res.returncode == 0, res.stderr
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["m-layerx.wrl", "m-summary.csv", "m.h5", "other.wrl"], names

@@ -167,7 +167,7 @@ contains
       class(phase1_distributor_type), intent(in), optional :: dist
       type(run_config_type) :: cfg
       type(model_type) :: model
-      type(string_type), allocatable :: outputs(:)
+      type(string_type), allocatable :: outputs(:), stale(:)
       logical :: overwrite, exists
       integer :: k
       type(particle_kind_type), allocatable :: kinds(:)
@@ -199,6 +199,14 @@ contains
                return
             end if
          end do
+         ! an earlier run's VRML that this run would not replace (and so would remove)
+         stale = obsolete_files(dir, trim(cfg%output%name), outputs)
+         if (size(stale) > 0) then
+            call fatal_error(error, stale(1)%s//" exists (VRML of an earlier run; this run writes " &
+                             //"no such file and would remove it): not removed (anm run --force, or " &
+                             //"&output overwrite = .true. in "//path//")", error_code%io)
+            return
+         end if
       end if
       call make_directory(dir, error)
       if (allocated(error)) then
@@ -237,6 +245,13 @@ contains
          call write_model_vrml(cfg, model, kinds, kind_of, base, set, error)
          if (allocated(error)) goto 99
       end if
+      ! an earlier run's VRML files of this name that this run does not write go with the set
+      outputs = output_files(base, cfg%output%vrml, cfg%output%vrml_per_layer .and. cfg%shells%nlayer > 0, &
+                             cfg%shells%nlayer)
+      stale = obsolete_files(dir, trim(cfg%output%name), outputs)
+      do k = 1, size(stale)
+         call set%retire(stale(k)%s)
+      end do
       call set%commit(error)
       if (allocated(error)) return
       call write_summary(out_unit, model)
@@ -275,6 +290,53 @@ contains
          files = [files, string_type(base//".wrl")]
       end if
    end function output_files
+
+   !> VRML files of output name `name` in folder `dir` (NAME.wrl, NAME-particles.wrl,
+   !> NAME-layerK.wrl) that exist but are not among `outputs`: an earlier run's files that the
+   !> current run does not replace.
+   function obsolete_files(dir, name, outputs) result(stale)
+      !> Output folder.
+      character(len=*), intent(in) :: dir
+      !> Output base name (&output name).
+      character(len=*), intent(in) :: name
+      !> The files this run writes.
+      type(string_type), intent(in) :: outputs(:)
+      type(string_type), allocatable :: stale(:)
+      type(string_type), allocatable :: names(:)
+      type(error_type), allocatable :: error
+      character(len=:), allocatable :: entry, full
+      integer :: i, k, n
+      logical :: ours
+      allocate (stale(0))
+      call list_directory(dir, names, error)
+      if (allocated(error)) return
+      do i = 1, size(names)
+         entry = names(i)%s
+         n = len(entry)
+         if (n < len(name) + 4) cycle
+         if (entry(:len(name)) /= name .or. entry(n - 3:) /= ".wrl") cycle
+         if (.not. vrml_suffix(entry(len(name) + 1:n - 4))) cycle
+         full = join_path(dir, entry)
+         ours = .false.
+         do k = 1, size(outputs)
+            if (outputs(k)%s == full) ours = .true.
+         end do
+         if (.not. ours) stale = [stale, string_type(full)]
+      end do
+   end function obsolete_files
+
+   !> True for what follows the output name in a VRML file Anm writes: "", "-particles" or
+   !> "-layerK" (K a positive integer).
+   pure logical function vrml_suffix(tail)
+      !> Text between the name and ".wrl".
+      character(len=*), intent(in) :: tail
+      vrml_suffix = .false.
+      if (tail == "" .or. tail == "-particles") then
+         vrml_suffix = .true.
+      else if (len(tail) > 6) then
+         if (tail(:6) == "-layer") vrml_suffix = verify(tail(7:), "0123456789") == 0
+      end if
+   end function vrml_suffix
 
    subroutine write_model_vrml(cfg, model, kinds, kind_of, base, set, error)
       type(run_config_type), intent(in) :: cfg

@@ -29,9 +29,13 @@ module anm_core_output
    type :: output_set_type
       !> Final and temporary names.
       type(string_type), allocatable :: final(:), temp(:)
+      !> Files of an earlier run that this set replaces without a new version (removed at commit).
+      type(string_type), allocatable :: obsolete(:)
    contains
       !> Register a final name; returns the temporary name to write to.
       procedure :: add => set_add
+      !> Register an earlier file to remove when the set is committed.
+      procedure :: retire => set_retire
       !> Rename every temporary to its final name (under a lock on the folder).
       procedure :: commit => set_commit
       !> Remove every temporary (after an error).
@@ -280,9 +284,28 @@ contains
       call move_alloc(t, self%temp)
    end subroutine set_add
 
+   !> Register `path`, a file of an earlier run that the set replaces without writing a new
+   !> version (e.g. the VRML file of a run that now writes none): it is removed by `commit`,
+   !> under the same lock as the renames, and left in place if the set is discarded.
+   subroutine set_retire(self, path)
+      !> Output set.
+      class(output_set_type), intent(inout) :: self
+      !> File to remove at commit.
+      character(len=*), intent(in) :: path
+      type(string_type), allocatable :: f(:)
+      integer :: n
+      n = 0
+      if (allocated(self%obsolete)) n = size(self%obsolete)
+      allocate (f(n + 1))
+      if (n > 0) f(:n) = self%obsolete
+      f(n + 1)%s = trim(path)
+      call move_alloc(f, self%obsolete)
+   end subroutine set_retire
+
    !> Make every temporary durable (fsync) and rename it to its final name; the renames of one
    !> set happen under an exclusive lock on the (first file's) folder, so that concurrent runs
-   !> replace whole sets. On error every remaining temporary is removed.
+   !> replace whole sets. Retired files are removed under the same lock, after the renames.
+   !> On error every remaining temporary is removed.
    subroutine set_commit(self, error)
       !> Output set.
       class(output_set_type), intent(inout) :: self
@@ -310,6 +333,11 @@ contains
             exit
          end if
       end do
+      if (.not. allocated(error) .and. allocated(self%obsolete)) then
+         do i = 1, size(self%obsolete)
+            call remove_file(self%obsolete(i)%s)
+         end do
+      end if
       call c_unlock_dir(fd)
       call self%discard()
    end subroutine set_commit
@@ -319,6 +347,7 @@ contains
       !> Output set.
       class(output_set_type), intent(inout) :: self
       integer :: i
+      if (allocated(self%obsolete)) deallocate (self%obsolete)
       if (.not. allocated(self%temp)) return
       do i = 1, size(self%temp)
          call remove_file(self%temp(i)%s)
