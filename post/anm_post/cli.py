@@ -24,6 +24,7 @@ EPILOG = """examples:
   anm-post convergence out/msand/model.h5 --densities 0.01,0.1,0.5,1 --csv conv.csv --png conv.png
   anm-post export out/default.h5 --format vtkhdf --output out/default.vtkhdf   surfaces + centres for ParaView
   anm-post voxels out/default.h5 --voxel 0.1 --output out/default-voxels.h5   labelled 3D image (also raw, vcctl)
+  anm-post law out/default.h5 --axis z --slabs 20 --gap-sieves 1 --png law.png   orientation, slab density, gaps
 """
 
 
@@ -219,6 +220,40 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     from .plots import plot_study
     plot_study(args.csv, args.output)
     print(_final_path(args, "output"))
+    return 0
+
+
+def _cmd_law(args: argparse.Namespace) -> int:
+    from .model import read_model
+    from . import law
+
+    if args.slabs < 1:
+        raise AnmPostError(f"--slabs: must be at least 1, got {args.slabs}")
+    if not (args.reach >= 0 and np.isfinite(args.reach)):
+        raise AnmPostError(f"--reach: must be a distance >= 0 in mm, got {args.reach}")
+    model = read_model(args.model)
+    gap_sieves = None
+    if args.gap_sieves.strip().lower() == "none":
+        gap_sieves = []
+    elif args.gap_sieves.strip().lower() != "all":
+        try:
+            gap_sieves = [int(x) - 1 for x in args.gap_sieves.split(",") if x.strip()]
+        except ValueError:
+            raise AnmPostError(f"--gap-sieves: expected 1-based sieve numbers, all or none, got {args.gap_sieves!r}") \
+                from None
+        bad = [s + 1 for s in gap_sieves if not 0 <= s < model.n_sieves]
+        if bad:
+            raise AnmPostError(f"--gap-sieves: {model.path} has sieves 1..{model.n_sieves}, not {bad[0]}")
+    _preparing("law", model)
+    orient = law.orientations(model)
+    vols = law.particle_volumes(model)
+    slabs = law.slab_profiles(model, "xyz".index(args.axis), args.slabs, volumes=vols)
+    gaps = None if gap_sieves == [] else law.centre_line_gaps(model, gap_sieves, reach=args.reach)
+    sys.stdout.write(law.format_report(model, orient, slabs, gaps, gap_sieves))
+    if args.csv:
+        write_text(args.csv, law.profiles_csv(slabs), "--csv")
+    if args.png:
+        law.plot_law(slabs, gaps, args.png)
     return 0
 
 
@@ -622,6 +657,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layers", metavar="K1,K2..", help="1-based layers of the s.d. panel (default: 4 spread layers)")
     p.add_argument("--rdf-png", metavar="FILE", help="also the bar plot of g(t) (Fig 3.8) at the highest density")
     p.set_defaults(func=_cmd_convergence)
+
+    p = sub.add_parser("law", help="orientation, centre density and gap statistics of a model (docs/dense.md)",
+                       description="The statistical law of a packing: eigenvalues of the orientation tensor of "
+                                   "the particles' long axes per sieve (1/3 each for isotropy, with the standard "
+                                   "error of an isotropic sample), the centre density of each sieve in slabs "
+                                   "across the box (1 = homogeneous; the wall effect of a mould shows at the "
+                                   "ends), and the centre-line gaps between the particles of chosen sieves.")
+    p.add_argument("model", help="model file (.h5)")
+    p.add_argument("--axis", choices=["x", "y", "z"], default="z", help="axis of the slab profiles (default z)")
+    p.add_argument("--slabs", type=int, default=20, metavar="N", help="number of slabs (default 20)")
+    p.add_argument("--gap-sieves", default="1", metavar="K1,K2..|all|none",
+                   help="1-based sieves whose pairs give the gap distribution (default 1, the coarsest)")
+    p.add_argument("--reach", type=float, default=0.5, metavar="MM",
+                   help="pairs whose bounding spheres are closer than this (default 0.5 mm)")
+    p.add_argument("--csv", metavar="FILE", help="write the slab profiles as CSV")
+    p.add_argument("--png", metavar="FILE", help="picture of the slab profiles and the gap histogram")
+    p.set_defaults(func=_cmd_law)
 
     p = sub.add_parser("sweep", help="table and plot of a parameter sweep of `anm run` (thesis Tables 2.1-2.3)",
                        description="Collect model-summary.csv files of runs that differ in one parameter into a "

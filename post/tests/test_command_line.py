@@ -16,7 +16,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 VERSION = re.search(r'^version\s*=\s*"([^"]+)"', (ROOT / "fpm.toml").read_text(), re.M).group(1)
 ANM_COMMANDS = ["run", "rerun", "verify", "shape", "synth", "study"]
-POST_COMMANDS = ["table", "slice", "plot", "rdf", "convergence", "sweep"]
+POST_COMMANDS = ["table", "slice", "plot", "rdf", "convergence", "sweep", "law"]
 
 NML = """&box length = 6, 6, 6 /
 &sieves nsieve = 1, min_width = 1.5, max_width = 2.0, fraction = 0.04, order = 4, source = 'synthetic' /
