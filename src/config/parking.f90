@@ -69,6 +69,8 @@ module anm_config_parking
       real(wp) :: dense_target_acceptance = 0.3_wp
       !> Dense: wall-clock limit (s) after which no new round starts (0: none; not deterministic).
       real(wp) :: dense_time_limit = 0.0_wp
+      !> Dense: a round's insertions park at this fraction of their drawn width and grow (0: no growth).
+      real(wp) :: dense_grow_scale = 0.0_wp
    end type parking_config_type
 
 contains
@@ -86,10 +88,10 @@ contains
       character(len=16) :: placement, strategy
       logical :: certified
       integer :: dense_rounds, dense_sweeps
-      real(wp) :: dense_target_acceptance, dense_time_limit
+      real(wp) :: dense_target_acceptance, dense_time_limit, dense_grow_scale
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
          n_ext, n_box, certified, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
-         dense_time_limit
+         dense_time_limit, dense_grow_scale
       integer :: ig, stat
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -109,6 +111,7 @@ contains
       dense_sweeps = self%dense_sweeps
       dense_target_acceptance = self%dense_target_acceptance
       dense_time_limit = self%dense_time_limit
+      dense_grow_scale = self%dense_grow_scale
       ig = find_group(nml, "parking")
       if (ig > 0) then
          lines = nml%groups(ig)%lines
@@ -141,7 +144,13 @@ contains
       self%dense_rounds = dense_rounds
       self%dense_sweeps = dense_sweeps
       self%dense_target_acceptance = dense_target_acceptance
+      if (.not. (dense_grow_scale >= 0.0_wp .and. dense_grow_scale < 1.0_wp)) then
+         call config_error(error, nml, ig, "parking", "dense_grow_scale", "= "//to_string(dense_grow_scale) &
+                           //" must be 0 (no growth) or in (0, 1)")
+         return
+      end if
       self%dense_time_limit = dense_time_limit
+      self%dense_grow_scale = dense_grow_scale
       self%max_locations = max_locations
       self%max_orientations = max_orientations
       self%max_sizes = max_sizes
@@ -274,7 +283,8 @@ contains
       if (self%strategy /= parking_strategy%rsa) then
          text = text//", strategy = '"//strategy_name(self%strategy)//"', dense_rounds = "//to_string(self%dense_rounds) &
                 //", dense_sweeps = "//to_string(self%dense_sweeps)//", dense_target_acceptance = " &
-                //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit)
+                //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit) &
+                //", dense_grow_scale = "//to_string(self%dense_grow_scale)
       end if
       text = text//" /"//new_line("a")
    end function dump_parking_config

@@ -41,11 +41,18 @@ module anm_parking_dense
    integer(i8), parameter :: move_salt = 6148914691236517205_i8
    !> Largest rotation step (rad) and translation step (fraction of the sieve's largest width).
    real(wp), parameter :: max_angle = 1.0_wp, max_step = 0.25_wp
+   !> Largest growth step (fraction of the target scale).
+   real(wp), parameter :: max_growth = 0.2_wp
 
    !> What the strategy needs of the run besides the RSA parameters.
    type :: dense_params_type
       !> Base seed.
       integer(i8) :: seed = 1_i8
+      !> Growth: a round's insertions park at this fraction of the drawn width and grow towards it
+      !> by Monte Carlo growth moves (0: no growth, insertions at full size).
+      real(wp) :: grow_scale = 0.0_wp
+      !> Shell layers given in mm (a particle short of its size would have a thinner shell).
+      logical :: absolute_shells = .false.
       !> Relaxation-and-insertion rounds per sieve; sweeps per round.
       integer :: rounds = 20, sweeps = 10
       !> Acceptance ratio the move sizes are tuned to.
@@ -58,10 +65,11 @@ module anm_parking_dense
 
    !> Move sizes per sieve and the counters of the last sweep.
    type :: move_state_type
-      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step.
-      real(wp), allocatable :: d(:), a(:), dmax(:)
-      !> Trials and acceptances of the last sweep per sieve: translations, rotations.
-      integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:)
+      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step; growth
+      !> step (fraction of the target scale).
+      real(wp), allocatable :: d(:), a(:), dmax(:), g(:)
+      !> Trials and acceptances of the last sweep per sieve: translations, rotations, growths.
+      integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:), ng(:), ag(:)
       !> Sweeps done (keys the streams).
       integer :: sweep = 0
    end type move_state_type
@@ -78,15 +86,19 @@ contains
       n = size(max_width)
       ms%d = 0.05_wp * max_width
       ms%dmax = max_step * max_width
-      allocate (ms%a(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n))
+      allocate (ms%a(n), ms%g(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
       ms%a = 0.2_wp
+      ms%g = 0.05_wp
       ms%nt = 0
       ms%at = 0
       ms%nr = 0
       ms%ar = 0
+      ms%ng = 0
+      ms%ag = 0
    end subroutine new_move_state
 
    !> Park every sieve (ap(s), target_fraction(s)) into pk.
+   !> Length: about 90 lines; the round loop of one sieve reads best in one piece.
    subroutine park_dense(pk, ks, ap, rp, dp, target_fraction, result, run, error)
       !> Packing.
       type(packing_type), intent(inout) :: pk
@@ -108,85 +120,219 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(move_state_type) :: ms
       type(sieve_result_type), allocatable :: r1(:)
-      type(sieve_result_type) :: res
+      type(sieve_result_type) :: res, full
       type(attempt_params_type) :: a2
-      real(wp) :: carry, target
-      integer :: s, round, j
+      real(wp), allocatable :: tsc(:)
+      real(wp) :: carry, target, f, request
+      integer :: s, round, j, np0
       integer(i8) :: t1, h, hh
-      allocate (result(size(ap)))
+      logical :: grow
+      allocate (result(size(ap)), tsc(0))
       call new_move_state(ms, ap(:)%max_width)
+      grow = dp%grow_scale > 0.0_wp
+      f = merge(dp%grow_scale, 1.0_wp, grow)
       carry = 0.0_wp
       do s = 1, size(ap)
          target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
          call park_rsa(pk, ks, ap(s:s), rp, [target / rp%vbox], r1, run, error)
          if (allocated(error)) return
+         call extend_targets(tsc, pk, 1.0_wp)
          res = r1(1)
          round = 0
-         do while (.not. res%reached .and. res%vol < target .and. round < dp%rounds)
+         do while (.not. res%reached .and. round < dp%rounds)
             if (dp%time_limit > 0.0_wp) then
                call system_clock(t1)
                if (real(t1 - run%t0, wp) / run%rate > dp%time_limit) exit
             end if
             round = round + 1
             do j = 1, dp%sweeps
-               call relax_sweep(pk, ms, dp)
+               call relax_sweep(pk, ms, dp, tsc)
             end do
             a2 = ap(s)
             h = int(s, i8) * 65536_i8 + round
             call splitmix64(h, hh)
             a2%seed = ieor(ap(s)%seed, hh)
-            call park_rsa(pk, ks, [a2], rp, [(target - res%vol) / rp%vbox], r1, run, error)
+            ! with growth the round's particles park at f times their drawn width: the request is
+            ! the missing volume (counted at the particles' target sizes) at that size
+            a2%min_width = f * ap(s)%min_width
+            a2%max_width = f * ap(s)%max_width
+            full = sieve_totals(pk, s, rp, tsc)
+            request = (target - full%vol) * f**3
+            np0 = pk%np
+            call park_rsa(pk, ks, [a2], rp, [request / rp%vbox], r1, run, error)
             if (allocated(error)) return
-            res%vol = res%vol + r1(1)%vol
-            res%count = res%count + r1(1)%count
-            res%shell_fraction = res%shell_fraction + r1(1)%shell_fraction
-            res%reached = r1(1)%reached .or. res%vol >= target
-            call round_line(rp, ms, s, round, res, target)
+            call extend_targets(tsc, pk, 1.0_wp / f)
+            if (grow .and. pk%np > np0) then
+               do j = 1, dp%sweeps
+                  call relax_sweep(pk, ms, dp, tsc)
+               end do
+            end if
+            full = sieve_totals(pk, s, rp, tsc)
+            if (grow .and. full%vol >= target - 0.5_wp * full%vol / max(1, full%count)) then
+               ! enough particles once grown: grow them; those that cannot grow go (next round)
+               call finish_growth(pk, ms, dp, tsc, s)
+               call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
+               full = sieve_totals(pk, s, rp, tsc)
+            end if
+            res = sieve_totals(pk, s, rp)
+            res%reached = full%vol >= target - 0.5_wp * full%vol / max(1, full%count)
+            call round_line(rp, ms, s, round, res, full, target)
          end do
+         if (grow) then
+            call finish_growth(pk, ms, dp, tsc, s)
+            call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
+            res = sieve_totals(pk, s, rp)
+            res%reached = res%vol >= target - 0.5_wp * res%vol / max(1, res%count)
+         end if
          result(s) = res
          carry = merge(target - res%vol, 0.0_wp, res%reached)
       end do
    end subroutine park_dense
 
+   !> Targets of the particles parked since the last call: scale times `factor` (1: at full size).
+   pure subroutine extend_targets(tsc, pk, factor)
+      real(wp), allocatable, intent(inout) :: tsc(:)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: factor
+      real(wp), allocatable :: t2(:)
+      integer :: n
+      n = size(tsc)
+      if (pk%np <= n) return
+      allocate (t2(pk%np))
+      t2(:n) = tsc
+      t2(n + 1:) = factor * pk%scale(n + 1:pk%np)
+      call move_alloc(t2, tsc)
+   end subroutine extend_targets
+
+   !> End of a sieve's growth: a particle of sieve s short of its target size stays (at its size,
+   !> its target reset) when its width is still in the sieve and its shells are not in mm (a shell
+   !> in mm would be thinner than prescribed); otherwise it is removed.
+   subroutine settle_growth(pk, tsc, s, min_width, absolute_shells)
+      type(packing_type), intent(inout) :: pk
+      real(wp), allocatable, intent(inout) :: tsc(:)
+      integer, intent(in) :: s
+      real(wp), intent(in) :: min_width
+      logical, intent(in) :: absolute_shells
+      integer :: i
+      logical :: removed
+      removed = .false.
+      do i = pk%np, 1, -1
+         if (pk%sieve(i) /= s .or. pk%scale(i) >= tsc(i)) cycle
+         if (.not. absolute_shells .and. pk%scale(i) * pk%kinds(pk%kind_of(i))%width >= min_width) then
+            tsc(i) = pk%scale(i)
+         else
+            tsc(i) = tsc(pk%np)
+            call pk%remove(i)
+            removed = .true.
+         end if
+      end do
+      tsc = tsc(:pk%np)
+      if (removed) call pk%compact()
+   end subroutine settle_growth
+
+   !> Particles, volume and shell fraction of sieve s as they are in the packing, or with every
+   !> particle at its target scale `tsc`.
+   pure function sieve_totals(pk, s, rp, tsc) result(res)
+      type(packing_type), intent(in) :: pk
+      integer, intent(in) :: s
+      type(rsa_params_type), intent(in) :: rp
+      real(wp), intent(in), optional :: tsc(:)
+      type(sieve_result_type) :: res
+      integer :: i, k
+      real(wp) :: sc
+      do i = 1, pk%np
+         if (pk%sieve(i) /= s) cycle
+         k = pk%kind_of(i)
+         sc = pk%scale(i)
+         if (present(tsc)) sc = tsc(i)
+         res%count = res%count + 1
+         res%vol = res%vol + sc**3 * pk%kinds(k)%volume
+         if (rp%nlayer > 0) res%shell_fraction = res%shell_fraction &
+                                                 + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) &
+                                                            - pk%kinds(k)%volume) / rp%vbox
+      end do
+   end function sieve_totals
+
+   !> Growth sweeps after a sieve's last round, while particles of sieve s are below their target
+   !> size and their volume still grows (stop after 10 sweeps without 0.01 % gain, or 50 x sweeps).
+   subroutine finish_growth(pk, ms, dp, tsc, s)
+      type(packing_type), intent(inout) :: pk
+      type(move_state_type), intent(inout) :: ms
+      type(dense_params_type), intent(in) :: dp
+      real(wp), intent(in) :: tsc(:)
+      integer, intent(in) :: s
+      integer :: j, idle, i
+      real(wp) :: vol, best
+      best = 0.0_wp
+      idle = 0
+      do j = 1, 50 * dp%sweeps
+         if (.not. any(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))) exit
+         vol = 0.0_wp
+         do i = 1, pk%np
+            if (pk%sieve(i) == s) vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
+         end do
+         if (vol > best * (1.0_wp + 1.0e-4_wp)) then
+            best = vol
+            idle = 0
+         else
+            idle = idle + 1
+            if (idle >= 10) exit
+         end if
+         call relax_sweep(pk, ms, dp, tsc)
+      end do
+   end subroutine finish_growth
+
    !> One relaxation sweep: one trial move per particle, particles in id order; move sizes tuned
-   !> afterwards; the cell list compacted.
-   subroutine relax_sweep(pk, ms, dp)
+   !> afterwards; the cell list compacted. With `target` (scale per particle id), a particle below
+   !> its target tries a growth step in a third of its trials.
+   !> Length: about 80 lines; the batch's parallel trial and in-order commit belong together.
+   subroutine relax_sweep(pk, ms, dp, target)
       !> Packing.
       type(packing_type), intent(inout) :: pk
       !> Move sizes and counters.
       type(move_state_type), intent(inout) :: ms
       !> Parameters (seed, threads, batch, target acceptance).
       type(dense_params_type), intent(in) :: dp
+      !> Target scale of each particle (growth).
+      real(wp), intent(in), optional :: target(:)
       type(fit_scratch_type), allocatable :: scr(:)
-      real(wp), allocatable :: xn(:, :), rn(:, :, :), cx(:, :), cr(:)
+      real(wp), allocatable :: xn(:, :), rn(:, :, :), sn(:), cx(:, :), cr(:), tg(:)
       logical, allocatable :: ok(:), inside(:)
       integer, allocatable :: typ(:)
       integer :: nb, i0, n, b, i, t, nc, s, np
       integer(i8) :: k
+      real(wp) :: rb
       ms%sweep = ms%sweep + 1
       k = ms%sweep
       ms%nt = 0
       ms%at = 0
       ms%nr = 0
       ms%ar = 0
+      ms%ng = 0
+      ms%ag = 0
       np = pk%np
+      if (present(target)) then
+         tg = target(:np)
+      else
+         tg = pk%scale(:np)
+      end if
       nb = dp%batch
       if (nb <= 0) nb = 8 * max(1, dp%nthreads)
-      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), ok(nb), inside(nb), typ(nb))
+      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sn(nb), ok(nb), inside(nb), typ(nb))
       ! committed moves of the batch: old and new centres, bounding radius
       allocate (cx(3, 2 * nb), cr(2 * nb))
       i0 = 0
       do while (i0 < np)
          n = min(nb, np - i0)
-         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, ok, inside, typ, n, i0, k, scr) private(b, i, t) &
-         !$omp schedule(dynamic, 1)
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sn, ok, inside, typ, n, i0, k, scr, tg) &
+         !$omp private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
             i = i0 + b
-            call propose(pk, ms, dp%seed, k, i, xn(:, b), rn(:, :, b), typ(b), inside(b))
+            call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sn(b), typ(b), inside(b))
             ok(b) = .false.
             if (inside(b)) then
                t = omp_get_thread_num()
-               ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), pk%scale(i), scr(t), exclude=i)
+               ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), sn(b), scr(t), exclude=i)
             end if
          end do
          !$omp end parallel do
@@ -194,24 +340,29 @@ contains
          do b = 1, n
             i = i0 + b
             s = pk%sieve(i)
+            rb = pk%rho(i) * max(1.0_wp, sn(b) / pk%scale(i))
             if (inside(b)) then
-               if (conflicts(pk, xn(:, b), pk%rho(i), cx, cr, nc)) then
-                  ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), pk%scale(i), scr(0), exclude=i)
+               if (conflicts(pk, xn(:, b), rb, cx, cr, nc)) then
+                  ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), sn(b), scr(0), exclude=i)
                end if
             end if
-            if (typ(b) == 1) then
+            select case (typ(b))
+            case (1)
                ms%nt(s) = ms%nt(s) + 1
                if (ok(b)) ms%at(s) = ms%at(s) + 1
-            else
+            case (2)
                ms%nr(s) = ms%nr(s) + 1
                if (ok(b)) ms%ar(s) = ms%ar(s) + 1
-            end if
+            case default
+               ms%ng(s) = ms%ng(s) + 1
+               if (ok(b)) ms%ag(s) = ms%ag(s) + 1
+            end select
             if (ok(b)) then
                cx(:, nc + 1) = pk%center(:, i)
                cx(:, nc + 2) = xn(:, b)
-               cr(nc + 1:nc + 2) = pk%rho(i)
+               cr(nc + 1:nc + 2) = rb
                nc = nc + 2
-               call pk%move(i, xn(:, b), rn(:, :, b))
+               call pk%move(i, xn(:, b), rn(:, :, b), sn(b))
             end if
          end do
          i0 = i0 + n
@@ -220,14 +371,17 @@ contains
       call pk%compact()
    end subroutine relax_sweep
 
-   !> The trial of particle i in sweep k: new centre x and rotation r; typ 1 translation, 2
-   !> rotation; inside false when a walled box's centre would leave the box.
-   subroutine propose(pk, ms, seed, k, i, x, r, typ, inside)
+   !> The trial of particle i in sweep k: new centre x, rotation r and scale sc; typ 1
+   !> translation, 2 rotation, 3 growth (a particle below its target scale `tgt`, a third of its
+   !> trials: the scale grows by g(s) times the target, capped at the target); inside false when
+   !> a walled box's centre would leave the box.
+   subroutine propose(pk, ms, seed, k, i, tgt, x, r, sc, typ, inside)
       type(packing_type), intent(in) :: pk
       type(move_state_type), intent(in) :: ms
       integer(i8), intent(in) :: seed, k
       integer, intent(in) :: i
-      real(wp), intent(out) :: x(3), r(3, 3)
+      real(wp), intent(in) :: tgt
+      real(wp), intent(out) :: x(3), r(3, 3), sc
       integer, intent(out) :: typ
       logical, intent(out) :: inside
       type(rng_type) :: rng
@@ -237,7 +391,15 @@ contains
       call new_rng(rng, ieor(seed, move_salt), k * 4294967296_i8 + i)
       x = pk%center(:, i)
       r = pk%rot(:, :, i)
+      sc = pk%scale(i)
       inside = .true.
+      if (sc < tgt) then
+         if (rng%uniform() < 1.0_wp / 3.0_wp) then
+            typ = 3
+            sc = min(tgt, sc + ms%g(s) * tgt)
+            return
+         end if
+      end if
       if (rng%uniform() < 0.5_wp) then
          typ = 1
          do
@@ -296,6 +458,11 @@ contains
             ms%d(s) = min(ms%dmax(s), max(0.5_wp * ms%d(s), min(2.0_wp * ms%d(s), ms%d(s) * (acc + 1.0_wp) &
                                                                  / (target + 1.0_wp))))
          end if
+         if (ms%ng(s) > 0) then
+            acc = real(ms%ag(s), wp) / real(ms%ng(s), wp)
+            ms%g(s) = min(max_growth, max(0.5_wp * ms%g(s), min(2.0_wp * ms%g(s), ms%g(s) * (acc + 1.0_wp) &
+                                                                / (target + 1.0_wp))))
+         end if
          if (ms%nr(s) > 0) then
             acc = real(ms%ar(s), wp) / real(ms%nr(s), wp)
             ms%a(s) = min(max_angle, max(0.5_wp * ms%a(s), min(2.0_wp * ms%a(s), ms%a(s) * (acc + 1.0_wp) &
@@ -305,18 +472,19 @@ contains
    end subroutine tune
 
    !> The line closing a round.
-   subroutine round_line(rp, ms, s, round, res, target)
+   subroutine round_line(rp, ms, s, round, res, full, target)
       type(rsa_params_type), intent(in) :: rp
       type(move_state_type), intent(in) :: ms
       integer, intent(in) :: s, round
-      type(sieve_result_type), intent(in) :: res
+      type(sieve_result_type), intent(in) :: res, full
       real(wp), intent(in) :: target
       real(wp) :: acc
       if (rp%progress_unit < 0) return
-      acc = real(ms%at(s) + ms%ar(s), wp) / max(1.0_wp, real(ms%nt(s) + ms%nr(s), wp))
-      write (rp%progress_unit, '(a,i0,a,i0,a,i0,a,f8.5,a,f8.5,a,f5.3,a,es9.2,a,f6.3,a)') "sieve ", s, ": dense round ", &
-         round, ", ", res%count, " particles, fraction ", res%vol / rp%vbox, " of ", target / rp%vbox, &
-         ", acceptance ", acc, ", step ", ms%d(s), " mm, ", ms%a(s), " rad"
+      acc = real(ms%at(s) + ms%ar(s) + ms%ag(s), wp) / max(1.0_wp, real(ms%nt(s) + ms%nr(s) + ms%ng(s), wp))
+      write (rp%progress_unit, '(a,i0,a,i0,a,i0,a,f8.5,a,f8.5,a,f8.5,a,f5.3,a,es9.2,a,f6.3,a,f6.3)') "sieve ", s, &
+         ": dense round ", round, ", ", res%count, " particles, fraction ", res%vol / rp%vbox, " (", &
+         full%vol / rp%vbox, " when grown) of ", target / rp%vbox, ", acceptance ", acc, ", step ", ms%d(s), &
+         " mm, ", ms%a(s), " rad, growth ", ms%g(s)
       flush (rp%progress_unit)
    end subroutine round_line
 end module anm_parking_dense

@@ -20,7 +20,7 @@ module anm_parking_engine
    use anm_shapes_source, only: load_shape_source
    use anm_config_job, only: run_config_type, placement, write_config
    use anm_config_parking, only: parking_strategy
-   use anm_shells_thickness, only: thickness_to_mm
+   use anm_shells_thickness, only: thickness_to_mm, thickness_unit
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
@@ -239,6 +239,8 @@ contains
       p%sweeps = cfg%parking%dense_sweeps
       p%target_acceptance = cfg%parking%dense_target_acceptance
       p%time_limit = cfg%parking%dense_time_limit
+      p%grow_scale = cfg%parking%dense_grow_scale
+      p%absolute_shells = cfg%shells%nlayer > 0 .and. cfg%shells%unit == thickness_unit%mm
       p%nthreads = omp_get_max_threads()
    end function dense_params
 
