@@ -81,6 +81,12 @@ def test_line_of_a_range_error_is_named(anm_bin, tmp_path):
     refused(anm_bin, tmp_path, text, "bad.nml:8: &parking: n_box = 1 must be >= 2")
 
 
+@pytest.mark.parametrize("value", ["1.0", "-0.5", "1.5"])
+def test_dense_grow_scale_out_of_range_is_named(anm_bin, tmp_path, value):
+    text = GOOD + f"&parking strategy = 'dense',\n  dense_grow_scale = {value} /\n"
+    refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: dense_grow_scale", "must be 0 (no growth) or in (0, 1)")
+
+
 def test_unknown_vrml_layout_is_named(anm_bin, tmp_path):
     text = GOOD.replace("vrml = .false. /", "vrml = .true.,\n  vrml_layout = 'flattened' /")
     refused(anm_bin, tmp_path, text, "bad.nml:5: &output: vrml_layout = 'flattened' must be 'instanced' or 'flat'")
