@@ -1,7 +1,9 @@
 !> The `anm` command of the MPI build (mpi/, scripts/build_mpi.sh): `mpirun -np N anm run FILE.nml`
 !> parks on every process (anm_mpi_distributor: phase 1 of each batch spread over the processes
-!> and their threads) and rank 0 writes the model, summary and VRML: the same model as the serial
-!> program. The other commands run on rank 0 alone, as in the serial program. Exit codes as
+!> and their threads); all processes write the model file together through parallel HDF5
+!> (anm_mpi_output) and rank 0 renames it and writes the summary and VRML: the same model as the
+!> serial program. `anm verify` is distributed too (each process audits the pairs of its slab,
+!> anm_mpi_verify). The other commands run on rank 0 alone, as in the serial program. Exit codes as
 !> app/main.f90 (docs/cli.md); an error on any process aborts the job (MPI_Abort).
 program anm_mpi
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
@@ -12,6 +14,8 @@ program anm_mpi
    use anm_cli_run, only: run_job, anm_version
    use anm_core_output, only: ignore_file_size_signal
    use anm_mpi_distributor, only: mpi_distributor_type, new_mpi_distributor
+   use anm_mpi_output, only: mpi_output_type, new_mpi_output
+   use anm_mpi_verify, only: mpi_verify_type, new_mpi_verify
    use mpi_f08, only: MPI_Init_thread, MPI_Finalize, MPI_Abort, MPI_COMM_WORLD, MPI_THREAD_FUNNELED
    use omp_lib, only: omp_get_max_threads
    implicit none
@@ -19,12 +23,16 @@ program anm_mpi
    type(string_type), allocatable :: args(:)
    type(error_type), allocatable :: error
    type(mpi_distributor_type) :: dist
+   type(mpi_output_type) :: io
+   type(mpi_verify_type) :: split
    integer :: status, provided
 
    ! MPI is called outside the OpenMP regions only
    call MPI_Init_thread(MPI_THREAD_FUNNELED, provided)
    call ignore_file_size_signal()
    call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads())
+   call new_mpi_output(io, MPI_COMM_WORLD)
+   call new_mpi_verify(split, MPI_COMM_WORLD)
    args = command_arguments()
    if (size(args) < 1) then
       if (dist%writer) call write_usage(error_unit)
@@ -35,8 +43,11 @@ program anm_mpi
       if (size(args) /= 2) then
          call fatal_error(error, "usage: anm run FILE.nml", error_code%value)
       else
-         call run_job(args(2)%s, output_unit, error_unit, error, omp_get_max_threads(), dist=dist)
+         call run_job(args(2)%s, output_unit, error_unit, error, omp_get_max_threads(), dist=dist, par=io)
       end if
+   else if (args(1)%s == "verify") then
+      ! every process audits its slab; rank 0 writes the combined report
+      call verify_command(args(2:), output_unit, status, error, split=split)
    else if (dist%writer) then
       select case (args(1)%s)
       case ("-h", "--help", "help")
@@ -47,8 +58,6 @@ program anm_mpi
          call shape_command(args(2:), output_unit, error)
       case ("synth")
          call synth_command(args(2:), output_unit, error)
-      case ("verify")
-         call verify_command(args(2:), output_unit, status, error)
       case ("study")
          call study_command(args(2:), output_unit, error)
       case default
