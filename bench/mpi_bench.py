@@ -10,6 +10,7 @@ of sieves 1..s it owns.
 Usage (from the repository root; builds with scripts/build.sh and scripts/build_mpi.sh first):
 
     python3 bench/mpi_bench.py [--job inputs/msand.nml] [--slabs 2 4 8 16 32 64] [--halo-only MODEL.h5]
+    python3 bench/mpi_bench.py --project CPU_1x1 CPU_2x1 PARTICLES PEAK_MB   # the scaling model only
 
 Prints markdown tables (pasted into docs/mpi.md). Jobs with ../shared/shapes need the folder.
 """
@@ -104,6 +105,45 @@ def halo_table(path: Path, slabs: list[int]) -> str:
     return "\n".join(rows)
 
 
+#: The concrete gradation of inputs/concrete.nml (width range mm, fraction, per-particle volume
+#: factor kappa = volume / mean(w^3): 0.32 coarse, 0.48 fine, as measured on M_sand's model) plus
+#: a sand sieve 0.15-0.3 mm at 0.05, in a 100 mm cube.
+CONCRETE = [(9.5, 12.5, 0.15, 0.32), (4.75, 9.5, 0.22, 0.32), (2.36, 4.75, 0.09, 0.48), (1.18, 2.36, 0.08, 0.48),
+            (0.6, 1.18, 0.08, 0.48), (0.3, 0.6, 0.08, 0.48), (0.15, 0.3, 0.05, 0.48)]
+
+
+def projection(cpu1: float, cpu2: float, n_ref: int, peak_mb: float, cores_per_node: int = 64,
+               efficiency: float = 0.8, decision_share: float = 0.1) -> str:
+    """The scaling model of docs/mpi.md from measured figures: CPU seconds of the job on the serial
+    program (1 thread) and on 2 ranks x 1 thread (the difference is the work every rank repeats),
+    its particle count and peak memory per rank."""
+    per_particle = cpu1 / n_ref
+    rho = max(0.0, (cpu2 - cpu1) / cpu1)
+    volume = 100.0 ** 3
+    counts = []
+    for a, b, f, kappa in CONCRETE:
+        mean_w3 = (b ** 4 - a ** 4) / (4.0 * (b - a))
+        counts.append(f * volume / (kappa * mean_w3))
+    n = sum(counts)
+    work = n * per_particle
+    mem_gb = peak_mb * n / n_ref / 1024.0
+    lines = [f"Measured: {per_particle * 1e6:.0f} us CPU per particle (serial, 1 thread), repeated share "
+             f"rho = {rho:.2f}; concrete 100 mm cube to 0.15 mm: {n / 1e6:.1f} million particles "
+             f"({', '.join(f'{c:,.0f}' for c in counts)} per sieve), {work / 3600:.1f} h CPU serial; "
+             f"memory of the whole model about {mem_gb:.0f} GB.", "",
+             "| nodes | cores | replicated design (today) | spatial decomposition (designed) | memory per rank (today / designed) |",
+             "|---:|---:|---:|---:|---:|"]
+    for nodes in (1, 8, 64):
+        cores = nodes * cores_per_node
+        ranks = 2 * nodes
+        t_rep = rho * work + (1 - rho) * work / (cores * efficiency)
+        t_sp = decision_share * rho * work + (1 - decision_share * rho) * work / (cores * efficiency)
+        mem_sp = mem_gb / ranks * 1.5
+        lines.append(f"| {nodes} | {cores} | {t_rep / 3600:.2f} h | {t_sp / 60:.1f} min | "
+                     f"{mem_gb:.0f} GB / {mem_sp:.1f} GB |")
+    return "\n".join(lines)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--job", default="inputs/msand.nml")
@@ -111,7 +151,13 @@ def main() -> int:
     ap.add_argument("--anm-mpi", default=str(ROOT / "build/install-mpi/bin/anm"))
     ap.add_argument("--slabs", type=int, nargs="+", default=[2, 4, 8, 16, 32, 64])
     ap.add_argument("--halo-only", help="only the halo table of this model file")
+    ap.add_argument("--project", type=float, nargs=4, metavar=("CPU_1x1", "CPU_2x1", "PARTICLES", "PEAK_MB"),
+                    help="only the scaling model from these measured figures")
     args = ap.parse_args()
+    if args.project:
+        c1, c2, n_ref, peak = args.project
+        print(projection(c1, c2, int(n_ref), peak))
+        return 0
     if args.halo_only:
         print(halo_table(Path(args.halo_only), args.slabs))
         return 0

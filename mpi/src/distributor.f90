@@ -20,7 +20,7 @@ module anm_mpi_distributor
    use anm_parking_void_grid, only: void_grid_type
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1
    use mpi_f08, only: MPI_Comm, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
-                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN
+                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime
    implicit none
    private
 
@@ -38,6 +38,9 @@ module anm_mpi_distributor
       integer(int64) :: reductions = 0
       !> Bytes of one attempt.
       integer :: attempt_bytes = 0
+      !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
+      !> the gathers (s).
+      real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
    end type comm_stats_type
 
    !> Phase 1 over the processes of a communicator.
@@ -97,15 +100,24 @@ contains
       integer(int8), allocatable :: mine(:), all(:)
       integer, allocatable :: counts(:), displs(:)
       integer :: n, r, bytes, i, b
+      real :: c0, c1
+      real(wp) :: w0, w1
       n = size(at)
       ! every process holds the same binary: an attempt travels as its bytes
       bytes = storage_size(at(1)) / 8
-      if (associated(self%stats)) call record_batch(self%stats, ap%sieve, n, bytes, self%nranks)
-      if (self%nranks == 1) then
-         call run_phase1(at, ap, pk, vg, nstream, 1, 1)
-         return
+      if (associated(self%stats)) then
+         call record_batch(self%stats, ap%sieve, n, bytes, self%nranks)
+         call cpu_time(c0)
+         w0 = MPI_Wtime()
       end if
       call run_phase1(at, ap, pk, vg, nstream, self%rank + 1, self%nranks)
+      if (associated(self%stats)) then
+         call cpu_time(c1)
+         w1 = MPI_Wtime()
+         self%stats%phase1_cpu = self%stats%phase1_cpu + (c1 - c0)
+         self%stats%phase1_wall = self%stats%phase1_wall + (w1 - w0)
+      end if
+      if (self%nranks == 1) return
       allocate (counts(0:self%nranks - 1), displs(0:self%nranks - 1))
       do r = 0, self%nranks - 1
          counts(r) = members(n, r, self%nranks)
@@ -119,8 +131,10 @@ contains
          b = self%rank + 1 + (i - 1) * self%nranks
          mine((i - 1) * bytes + 1:i * bytes) = transfer(at(b), mine)
       end do
+      if (associated(self%stats)) w0 = MPI_Wtime()
       call MPI_Allgatherv(mine, counts(self%rank) * bytes, MPI_BYTE, all, counts * bytes, displs * bytes, MPI_BYTE, &
                           self%comm)
+      if (associated(self%stats)) self%stats%gather_wall = self%stats%gather_wall + (MPI_Wtime() - w0)
       ! rank r's members are r + 1, r + 1 + nranks, ... in order
       do r = 0, self%nranks - 1
          do i = 1, counts(r)
@@ -175,6 +189,7 @@ contains
       integer :: s, nb, nsieve, per
       integer(int64), allocatable :: b(:)
       integer, allocatable :: nm(:)
+      real :: cpu
       character(len=*), parameter :: fmt_sieve = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
                                      '" members, ",i0," bytes gathered to each rank (per batch min/median/max ",' // &
                                      'i0,"/",i0,"/",i0,")")'
@@ -198,9 +213,13 @@ contains
                maxval(nm) * per
             total = total + sum(b)
          end do
-         write (unit, '("mpi: in all ",i0," batches, ",i0," bytes gathered to each rank (",i0," bytes per attempt, ",' // &
-                '"one MPI_Allgatherv per batch), ",i0," MPI_Allreduce of 8 bytes (the batch clock, the run attributes); ",i0," ranks x ",i0,' // &
-                '" threads")') st%nbatch, total, st%attempt_bytes, st%reductions, dist%nranks, dist%workers / dist%nranks
+         write (unit, '("mpi: in all ",i0," batches, ",i0," bytes gathered to each rank (",i0," bytes per ",' // &
+                '"attempt, one MPI_Allgatherv per batch), ",i0," MPI_Allreduce of 8 bytes (the batch clock, ",' // &
+                '"the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, total, st%attempt_bytes, &
+            st%reductions, dist%nranks, dist%workers / dist%nranks
+         call cpu_time(cpu)
+         write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
+                '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu
          write (unit, '("mpi: peak memory per rank (VmHWM) min/mean/max ",f0.1,"/",f0.1,"/",f0.1," MB")') &
             real(lo, wp) / 1024, real(sum_mem, wp) / 1024 / dist%nranks, real(hi, wp) / 1024
       end associate

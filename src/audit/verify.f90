@@ -209,8 +209,9 @@ contains
          real(wp), allocatable :: shift(:, :)
          real(wp), allocatable :: cw(:, :)
          integer :: ncand, i, q
-         real(wp) :: d, dw
+         real(wp) :: d, dw, pair_max
          logical :: hit
+         pair_max = 0.0_wp
          allocate (cw(3, model%np))
          do i = 1, model%np
             cw(:, i) = wrap(model, model%center(:, i))
@@ -250,8 +251,10 @@ contains
                d = max(pair_depth(model, samp, key, rho, pruned, p, cw(:, p), q, cw(:, q) + shift(:, i)), &
                        pair_depth(model, samp, key, rho, pruned, q, cw(:, q) + shift(:, i), p, cw(:, p)))
                if (d > report%tolerance) nover = nover + 1
-               if (d > depth_max) then
-                  depth_max = d
+               if (d > depth_max) depth_max = d
+               ! the deepest pair between particles (walls apart, which depth_max also holds)
+               if (d > pair_max) then
+                  pair_max = d
                   !$omp critical (verify_worst)
                   if (d > worst_depth) then
                      worst_depth = d
