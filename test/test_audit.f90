@@ -7,13 +7,19 @@ module test_audit
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
    use anm_io_model, only: model_type
-   use anm_audit_verify, only: verify_report_type, verify_model
+   use anm_audit_verify, only: verify_report_type, verify_model, verify_split_type
    use anm_shapes_analytic, only: sphere_shape
    use anm_geometry_rotation, only: random_rotation
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
    public :: collect_audit
+
+   !> One process of a distributed audit, without MPI: `reduce` leaves the slab's own report.
+   type, extends(verify_split_type) :: slab_only_type
+   contains
+      procedure :: reduce => keep_report
+   end type slab_only_type
 
 contains
 
@@ -27,7 +33,9 @@ contains
               new_unittest("verify: a particle through a wall fails", test_verify_wall), &
               new_unittest("verify: pruned sampling gives the report of every sample (sizes 8:1)", &
                            test_verify_pruning), &
-              new_unittest("verify: a small overlap planted in a big parked model is found", test_verify_planted)]
+              new_unittest("verify: a small overlap planted in a big parked model is found", test_verify_planted), &
+              new_unittest("verify: the slabs of 2 and 3 processes share the pairs and walls exactly", &
+                           test_verify_slabs)]
    end subroutine collect_audit
 
    !> A model of spheres of radius 1 (shape 1) at the given centres.
@@ -202,4 +210,66 @@ contains
       call check(error, rep%max_depth, best, "planted depth", rel=1.0e-9_wp)
    end subroutine test_verify_planted
 
+
+   subroutine keep_report(self, report)
+      class(slab_only_type), intent(in) :: self
+      type(verify_report_type), intent(inout) :: report
+   end subroutine keep_report
+
+   !> The audit of each slab (what rank r of n audits under MPI) summed over the slabs is the
+   !> serial audit: pairs, cleared pairs, overlaps and walls, the largest penetration and its pair.
+   !> 80 spheres at random in a 10 mm box, many overlapping (across slab borders and, periodic,
+   !> across the box), and through the walls when not periodic.
+   subroutine test_verify_slabs(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      type(verify_report_type) :: whole, part
+      type(slab_only_type) :: split
+      type(rng_type) :: rng
+      real(wp) :: c(3, 80), depth
+      integer(i8) :: pairs, cleared, over
+      integer :: walls, n, r, ip, worst(2), ns(2)
+      logical :: periodic
+      call new_rng(rng, 11_i8, 0_i8)
+      do ip = 1, 80
+         c(:, ip) = [rng%uniform_range(0.0_wp, 10.0_wp), rng%uniform_range(0.0_wp, 10.0_wp), &
+                     rng%uniform_range(0.0_wp, 10.0_wp)]
+      end do
+      ns = [2, 3]
+      do ip = 0, 1
+         periodic = ip == 1
+         m = sphere_model(c, periodic, [10.0_wp, 10.0_wp, 10.0_wp])
+         call verify_model(m, 12, whole, filter=.true.)
+         call check(error, whole%overlapping_pairs > 20, "many overlaps expected")
+         if (allocated(error)) return
+         do n = 1, size(ns)
+            pairs = 0
+            cleared = 0
+            over = 0
+            walls = 0
+            depth = 0.0_wp
+            worst = 0
+            split%nranks = ns(n)
+            do r = 0, ns(n) - 1
+               split%rank = r
+               call verify_model(m, 12, part, filter=.true., split=split)
+               pairs = pairs + part%pairs_checked
+               cleared = cleared + part%pairs_cleared
+               over = over + part%overlapping_pairs
+               walls = walls + part%wall_violations
+               depth = max(depth, part%max_depth)
+               if (part%worst_depth == whole%worst_depth) worst = part%worst
+            end do
+            call check(error, pairs == whole%pairs_checked .and. cleared == whole%pairs_cleared .and. &
+                       over == whole%overlapping_pairs .and. walls == whole%wall_violations, &
+                       "the slabs' counts sum to the serial ones")
+            if (allocated(error)) return
+            call check(error, depth == whole%max_depth .and. all(worst == whole%worst), &
+                       "the largest penetration and its pair are the serial ones")
+            if (allocated(error)) return
+         end do
+         call check(error, periodic .or. whole%wall_violations > 0, "walls crossed expected")
+         if (allocated(error)) return
+      end do
+   end subroutine test_verify_slabs
 end module test_audit

@@ -1,7 +1,9 @@
 !> The `anm` command of the MPI build (mpi/, scripts/build_mpi.sh): `mpirun -np N anm run FILE.nml`
 !> parks on every process (anm_mpi_distributor: phase 1 of each batch spread over the processes
-!> and their threads) and rank 0 writes the model, summary and VRML: the same model as the serial
-!> program. The other commands run on rank 0 alone, as in the serial program. Exit codes as
+!> and their threads); all processes write the model file together through parallel HDF5
+!> (anm_mpi_output) and rank 0 renames it and writes the summary and VRML: the same model as the
+!> serial program. `anm verify` is distributed too (each process audits the pairs of its slab,
+!> anm_mpi_verify). The other commands run on rank 0 alone, as in the serial program. Exit codes as
 !> app/main.f90 (docs/cli.md); an error on any process aborts the job (MPI_Abort).
 program anm_mpi
    use, intrinsic :: iso_fortran_env, only: output_unit, error_unit
@@ -11,7 +13,9 @@ program anm_mpi
    use anm_cli_commands, only: write_usage, shape_command, synth_command, verify_command, study_command
    use anm_cli_run, only: run_job, anm_version
    use anm_core_output, only: ignore_file_size_signal
-   use anm_mpi_distributor, only: mpi_distributor_type, new_mpi_distributor
+   use anm_mpi_distributor, only: mpi_distributor_type, new_mpi_distributor, write_comm_stats
+   use anm_mpi_output, only: mpi_output_type, new_mpi_output
+   use anm_mpi_verify, only: mpi_verify_type, new_mpi_verify
    use mpi_f08, only: MPI_Init_thread, MPI_Finalize, MPI_Abort, MPI_COMM_WORLD, MPI_THREAD_FUNNELED
    use omp_lib, only: omp_get_max_threads
    implicit none
@@ -19,24 +23,53 @@ program anm_mpi
    type(string_type), allocatable :: args(:)
    type(error_type), allocatable :: error
    type(mpi_distributor_type) :: dist
-   integer :: status, provided
+   type(mpi_output_type) :: io
+   type(mpi_verify_type) :: split
+   integer :: status, provided, k
+   character(len=:), allocatable :: nml
+   logical :: force, stats
 
    ! MPI is called outside the OpenMP regions only
    call MPI_Init_thread(MPI_THREAD_FUNNELED, provided)
    call ignore_file_size_signal()
-   call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads())
    args = command_arguments()
+   ! `anm run FILE.nml [--force] [--comm-stats]`: --comm-stats prints what was communicated
+   stats = .false.
+   do k = 2, size(args)
+      if (args(1)%s == "run" .and. args(k)%s == "--comm-stats") stats = .true.
+   end do
+   call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads(), count=stats)
+   call new_mpi_output(io, MPI_COMM_WORLD)
+   call new_mpi_verify(split, MPI_COMM_WORLD)
    if (size(args) < 1) then
       if (dist%writer) call write_usage(error_unit)
       call finish(2)
    end if
    status = 0
    if (args(1)%s == "run") then
-      if (size(args) /= 2) then
-         call fatal_error(error, "usage: anm run FILE.nml", error_code%value)
-      else
-         call run_job(args(2)%s, output_unit, error_unit, error, omp_get_max_threads(), dist=dist)
+      force = .false.
+      do k = 2, size(args)
+         select case (args(k)%s)
+         case ("--force")
+            force = .true.
+         case ("--comm-stats")
+         case default
+            if (allocated(nml) .or. args(k)%s(1:min(1, len(args(k)%s))) == "-") then
+               call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats]", error_code%usage)
+               exit
+            end if
+            nml = args(k)%s
+         end select
+      end do
+      if (.not. allocated(nml) .and. .not. allocated(error)) &
+         call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats]", error_code%usage)
+      if (.not. allocated(error)) then
+         call run_job(nml, output_unit, error_unit, error, omp_get_max_threads(), force=force, dist=dist, par=io)
+         if (stats .and. .not. allocated(error)) call write_comm_stats(dist, error_unit)
       end if
+   else if (args(1)%s == "verify") then
+      ! every process audits its slab; rank 0 writes the combined report
+      call verify_command(args(2:), output_unit, status, error, split=split)
    else if (dist%writer) then
       select case (args(1)%s)
       case ("-h", "--help", "help")
@@ -47,8 +80,6 @@ program anm_mpi
          call shape_command(args(2:), output_unit, error)
       case ("synth")
          call synth_command(args(2:), output_unit, error)
-      case ("verify")
-         call verify_command(args(2:), output_unit, status, error)
       case ("study")
          call study_command(args(2:), output_unit, error)
       case default

@@ -5,28 +5,52 @@
 !> accept) then runs identically on every process, so every process parks the serial model
 !> (anm_parking_scheduler: any batch composition gives the serial result).
 !>
+!> With `count = .true.` it counts what it communicates (`comm_stats_type`: per batch its sieve
+!> and the bytes gathered to every process, the batch-clock reductions) and `write_comm_stats`
+!> prints them per sieve with the peak memory of every process (`anm run FILE.nml --comm-stats`).
+!>
 !> Usage:
 !>     call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads())
 !>     call run_job(path, output_unit, error_unit, error, threads, dist=dist)
 module anm_mpi_distributor
-   use, intrinsic :: iso_fortran_env, only: int8
+   use, intrinsic :: iso_fortran_env, only: int8, int64
    use anm_core_kinds, only: wp
    use anm_parking_attempts, only: attempt_type, attempt_params_type
    use anm_parking_packing, only: packing_type
    use anm_parking_void_grid, only: void_grid_type
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1
    use mpi_f08, only: MPI_Comm, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
-                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_MAX, MPI_SUM
+                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime
    implicit none
    private
 
-   public :: mpi_distributor_type, new_mpi_distributor
+   public :: mpi_distributor_type, new_mpi_distributor, comm_stats_type, write_comm_stats, peak_memory_kb
+
+   !> What the distributor communicated: per batch the sieve and the bytes of the attempts gathered
+   !> to every process (members x attempt size), and the number of batch-clock reductions.
+   type :: comm_stats_type
+      !> Batches recorded.
+      integer :: nbatch = 0
+      !> Per batch: sieve, members, bytes gathered to every process.
+      integer, allocatable :: sieve(:), members(:)
+      integer(int64), allocatable :: bytes(:)
+      !> Allreduce calls of the batch clock (8 bytes each).
+      integer(int64) :: reductions = 0
+      !> Bytes of one attempt.
+      integer :: attempt_bytes = 0
+      !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
+      !> the gathers (s).
+      real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
+   end type comm_stats_type
 
    !> Phase 1 over the processes of a communicator.
    type, extends(phase1_distributor_type) :: mpi_distributor_type
       !> Communicator, this process' rank and the number of processes.
       type(MPI_Comm) :: comm
       integer :: rank = 0, nranks = 1
+      !> Counters (allocated when counting; a pointer, so that the collective calls, which take
+      !> the distributor as intent(in), can count).
+      type(comm_stats_type), pointer :: stats => null()
    contains
       procedure :: phase1
       procedure :: agree
@@ -36,14 +60,22 @@ contains
 
    !> A distributor over `comm` (collective): `threads` are this process' threads; the batches are
    !> sized for the threads of all processes; rank 0 writes.
-   subroutine new_mpi_distributor(dist, comm, threads)
+   subroutine new_mpi_distributor(dist, comm, threads, count)
       !> Distributor.
       type(mpi_distributor_type), intent(out) :: dist
       !> Communicator.
       type(MPI_Comm), intent(in) :: comm
       !> Threads of this process.
       integer, intent(in) :: threads
+      !> Count what is communicated (comm_stats_type).
+      logical, intent(in), optional :: count
       dist%comm = comm
+      if (present(count)) then
+         if (count) then
+            allocate (dist%stats)
+            allocate (dist%stats%sieve(64), dist%stats%members(64), dist%stats%bytes(64))
+         end if
+      end if
       call MPI_Comm_rank(comm, dist%rank)
       call MPI_Comm_size(comm, dist%nranks)
       call MPI_Allreduce(max(1, threads), dist%workers, 1, MPI_INTEGER, MPI_SUM, comm)
@@ -68,14 +100,24 @@ contains
       integer(int8), allocatable :: mine(:), all(:)
       integer, allocatable :: counts(:), displs(:)
       integer :: n, r, bytes, i, b
+      real :: c0, c1
+      real(wp) :: w0, w1
       n = size(at)
-      if (self%nranks == 1) then
-         call run_phase1(at, ap, pk, vg, nstream, 1, 1)
-         return
-      end if
-      call run_phase1(at, ap, pk, vg, nstream, self%rank + 1, self%nranks)
       ! every process holds the same binary: an attempt travels as its bytes
       bytes = storage_size(at(1)) / 8
+      if (associated(self%stats)) then
+         call record_batch(self%stats, ap%sieve, n, bytes, self%nranks)
+         call cpu_time(c0)
+         w0 = MPI_Wtime()
+      end if
+      call run_phase1(at, ap, pk, vg, nstream, self%rank + 1, self%nranks)
+      if (associated(self%stats)) then
+         call cpu_time(c1)
+         w1 = MPI_Wtime()
+         self%stats%phase1_cpu = self%stats%phase1_cpu + (c1 - c0)
+         self%stats%phase1_wall = self%stats%phase1_wall + (w1 - w0)
+      end if
+      if (self%nranks == 1) return
       allocate (counts(0:self%nranks - 1), displs(0:self%nranks - 1))
       do r = 0, self%nranks - 1
          counts(r) = members(n, r, self%nranks)
@@ -89,8 +131,10 @@ contains
          b = self%rank + 1 + (i - 1) * self%nranks
          mine((i - 1) * bytes + 1:i * bytes) = transfer(at(b), mine)
       end do
+      if (associated(self%stats)) w0 = MPI_Wtime()
       call MPI_Allgatherv(mine, counts(self%rank) * bytes, MPI_BYTE, all, counts * bytes, displs * bytes, MPI_BYTE, &
                           self%comm)
+      if (associated(self%stats)) self%stats%gather_wall = self%stats%gather_wall + (MPI_Wtime() - w0)
       ! rank r's members are r + 1, r + 1 + nranks, ... in order
       do r = 0, self%nranks - 1
          do i = 1, counts(r)
@@ -108,7 +152,115 @@ contains
       real(wp), intent(in) :: x
       real(wp) :: y
       call MPI_Allreduce(x, y, 1, MPI_DOUBLE_PRECISION, MPI_MAX, self%comm)
+      if (associated(self%stats)) self%stats%reductions = self%stats%reductions + 1
    end function agree
+
+   !> Count one batch of n members of `bytes` each (nothing is communicated on one process).
+   subroutine record_batch(st, sieve, n, bytes, nranks)
+      type(comm_stats_type), intent(inout) :: st
+      integer, intent(in) :: sieve, n, bytes, nranks
+      integer, allocatable :: i1(:), i2(:)
+      integer(int64), allocatable :: i3(:)
+      if (st%nbatch == size(st%sieve)) then
+         allocate (i1(2 * st%nbatch), i2(2 * st%nbatch), i3(2 * st%nbatch))
+         i1(:st%nbatch) = st%sieve
+         i2(:st%nbatch) = st%members
+         i3(:st%nbatch) = st%bytes
+         call move_alloc(i1, st%sieve)
+         call move_alloc(i2, st%members)
+         call move_alloc(i3, st%bytes)
+      end if
+      st%nbatch = st%nbatch + 1
+      st%sieve(st%nbatch) = sieve
+      st%members(st%nbatch) = n
+      st%bytes(st%nbatch) = 0
+      if (nranks > 1) st%bytes(st%nbatch) = int(n, int64) * bytes
+      st%attempt_bytes = bytes
+   end subroutine record_batch
+
+   !> Print the counters per sieve and in all, and the peak memory (VmHWM) over the processes
+   !> (collective; rank 0 prints to `unit`): lines starting "mpi:".
+   subroutine write_comm_stats(dist, unit)
+      !> Distributor (counting).
+      type(mpi_distributor_type), intent(in) :: dist
+      !> Output unit (rank 0).
+      integer, intent(in) :: unit
+      integer(int64) :: mem, lo, hi, sum_mem, total
+      integer :: s, nb, nsieve, per
+      integer(int64), allocatable :: b(:)
+      integer, allocatable :: nm(:)
+      real :: cpu
+      character(len=*), parameter :: fmt_sieve = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
+                                     '" members, ",i0," bytes gathered to each rank (per batch min/median/max ",' // &
+                                     'i0,"/",i0,"/",i0,")")'
+      mem = peak_memory_kb()
+      call MPI_Allreduce(mem, lo, 1, MPI_INTEGER8, MPI_MIN, dist%comm)
+      call MPI_Allreduce(mem, hi, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
+      call MPI_Allreduce(mem, sum_mem, 1, MPI_INTEGER8, MPI_SUM, dist%comm)
+      if (dist%rank /= 0 .or. .not. associated(dist%stats)) return
+      associate (st => dist%stats)
+         nsieve = 0
+         if (st%nbatch > 0) nsieve = maxval(st%sieve(:st%nbatch))
+         total = 0
+         do s = 1, nsieve
+            nb = count(st%sieve(:st%nbatch) == s)
+            if (nb == 0) cycle
+            b = pack(st%bytes(:st%nbatch), st%sieve(:st%nbatch) == s)
+            nm = pack(st%members(:st%nbatch), st%sieve(:st%nbatch) == s)
+            per = 0
+            if (dist%nranks > 1) per = st%attempt_bytes
+            write (unit, fmt_sieve) s, nb, sum(int(nm, int64)), sum(b), minval(nm) * per, median(nm) * per, &
+               maxval(nm) * per
+            total = total + sum(b)
+         end do
+         write (unit, '("mpi: in all ",i0," batches, ",i0," bytes gathered to each rank (",i0," bytes per ",' // &
+                '"attempt, one MPI_Allgatherv per batch), ",i0," MPI_Allreduce of 8 bytes (the batch clock, ",' // &
+                '"the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, total, st%attempt_bytes, &
+            st%reductions, dist%nranks, dist%workers / dist%nranks
+         call cpu_time(cpu)
+         write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
+                '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu
+         write (unit, '("mpi: peak memory per rank (VmHWM) min/mean/max ",f0.1,"/",f0.1,"/",f0.1," MB")') &
+            real(lo, wp) / 1024, real(sum_mem, wp) / 1024 / dist%nranks, real(hi, wp) / 1024
+      end associate
+   end subroutine write_comm_stats
+
+   !> Peak resident memory of this process (kB, VmHWM of /proc/self/status; 0 when unknown).
+   function peak_memory_kb() result(kb)
+      integer(int64) :: kb
+      character(len=256) :: line
+      integer :: u, st
+      kb = 0
+      open (newunit=u, file="/proc/self/status", action="read", status="old", iostat=st)
+      if (st /= 0) return
+      do
+         read (u, '(a)', iostat=st) line
+         if (st /= 0) exit
+         if (line(1:6) == "VmHWM:") then
+            read (line(7:), *, iostat=st) kb
+            exit
+         end if
+      end do
+      close (u)
+   end function peak_memory_kb
+
+   !> The median of non-negative values (counting; the values are batch sizes, at most a few
+   !> thousand).
+   pure integer function median(v) result(m)
+      integer, intent(in) :: v(:)
+      integer, allocatable :: c(:)
+      integer :: k, seen
+      allocate (c(0:maxval(v)))
+      c = 0
+      do k = 1, size(v)
+         c(v(k)) = c(v(k)) + 1
+      end do
+      seen = 0
+      do m = 0, ubound(c, 1)
+         seen = seen + c(m)
+         if (2 * seen >= size(v)) return
+      end do
+   end function median
 
    !> Members of a batch of n on rank r of nranks (round robin).
    pure integer function members(n, r, nranks) result(m)

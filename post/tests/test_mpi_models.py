@@ -2,17 +2,26 @@
 off) run with `mpirun -np N` for N = 1..4 ranks and 1 and 2 threads per rank gives every dataset of /box,
 /shapes, /particles and /sieves identical (SHA-256 of dtype, shape and bytes) to the serial
 model's recorded digests (data/identical_models.json, which test_identical_models.py checks the
-serial program against).
+serial program against). A small M_sand-like job (a coarse and a sand sieve of real shapes,
+overlapping shells) gives the serial program's model file, dataset by dataset and attribute by
+attribute (scripts/compare_models.py; the run's threads and times aside), for the other rank and
+thread combinations. The model file is written by all ranks together (parallel HDF5): it is read
+by h5py and anm_post (Python validation), and by the serial program's reader (`anm verify`).
+`anm verify` under mpirun (each rank audits its slab) reports what the serial audit reports.
 
 Needs $ANM_MPI_BIN (scripts/test.sh sets it); skipped without it, a failure under CI=true.
 """
 import json
+import math
 import os
 import pathlib
 import re
 import shutil
 import subprocess
+import sys
 
+import h5py
+import numpy as np
 import pytest
 
 from test_identical_models import DIGESTS, model_digest
@@ -22,6 +31,25 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 # runs the eight combinations
 ALL_CASES = [(1, 1), (1, 2), (2, 1), (2, 2), (3, 1), (3, 2), (4, 1), (4, 2)]
 CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(1, 2), (2, 1), (3, 2), (4, 1)]
+# the small job: the other four combinations by default
+SMALL_CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(1, 1), (2, 2), (3, 1), (4, 2)]
+MPIRUN = ["mpirun", "--allow-run-as-root", "--oversubscribe"]
+# the run's own attributes, which differ between runs of one model
+RUN_ATTRIBUTES = ("wall_time", "threads", "program_version")
+SMALL_NML = """&box length = 4.0, 4.0, 4.0, periodic = .true. /
+&sieves
+   nsieve = 2
+   min_width = 1.9, 0.15
+   max_width = 2.0, 0.25
+   fraction = 0.15, 0.03
+   source = '{shapes}/MA111-7-coarse/MA111-7-coarse-anm-00002.dat', '{shapes}/MA107-6-fine/MA107-6-fine-anm-00002.dat'
+   order = 8, 5
+/
+&parking max_locations = 2000 /
+&shells nlayer = 1, thickness = 0.02, thickness_unit = 'fraction', mode = 'overlap' /
+&output directory = '{out}', name = 'model', vrml = .false. /
+&run seed = 1 /
+"""
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +70,8 @@ def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
     nml = tmp_path / "default.nml"
     nml.write_text(text)
     env = dict(os.environ, OMP_NUM_THREADS=str(threads))
-    res = subprocess.run(["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(ranks),
-                          mpi_bin, "run", str(nml)], capture_output=True, text=True, timeout=600,
-                         cwd=ROOT, env=env)
+    res = subprocess.run(MPIRUN + ["-np", str(ranks), mpi_bin, "run", str(nml)], capture_output=True, text=True,
+                         timeout=600, cwd=ROOT, env=env)
     assert res.returncode == 0, res.stdout + res.stderr
     # one summary (rank 0 alone writes and prints)
     assert res.stdout.count("model: ") == 1, res.stdout
@@ -53,3 +80,120 @@ def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
     changed = sorted(k for k in recorded if digest.get(k) != recorded[k])
     assert not changed, f"{ranks} ranks x {threads} threads: datasets that differ from the serial model: {changed}"
     assert set(digest) == set(recorded)
+
+
+def compare(a, b):
+    """scripts/compare_models.py a b, the run's own attributes and the namelist text aside."""
+    cmd = [sys.executable, str(ROOT / "scripts" / "compare_models.py"), str(a), str(b),
+           "--skip", "run/namelist", "--skip", "run/resolved_namelist"]
+    for name in RUN_ATTRIBUTES:
+        cmd += ["--ignore", name]
+    return subprocess.run(cmd, capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def small_serial(anm_bin, shapes_dir, tmp_path_factory):
+    """The small M_sand-like job run by the serial program: (namelist text template, model path)."""
+    out = tmp_path_factory.mktemp("small-serial")
+    nml = out / "small.nml"
+    nml.write_text(SMALL_NML.format(shapes=shapes_dir, out=out))
+    res = subprocess.run([anm_bin, "run", str(nml)], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, OMP_NUM_THREADS="1"))
+    assert res.returncode == 0, res.stdout + res.stderr
+    return out / "model.h5"
+
+
+def run_mpi(mpi_bin, ranks, threads, args, **kw):
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+    return subprocess.run(MPIRUN + ["-np", str(ranks), mpi_bin] + args, capture_output=True, text=True,
+                          timeout=600, cwd=ROOT, env=env, **kw)
+
+
+@pytest.mark.parametrize("ranks,threads", SMALL_CASES, ids=[f"{r}x{t}" for r, t in SMALL_CASES])
+def test_mpi_small_msand_job_is_the_serial_model_file(ranks, threads, mpi_bin, shapes_dir, small_serial, tmp_path):
+    nml = tmp_path / "small.nml"
+    nml.write_text(SMALL_NML.format(shapes=shapes_dir, out=tmp_path))
+    res = run_mpi(mpi_bin, ranks, threads, ["run", str(nml)])
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert res.stdout.count("model: ") == 1, res.stdout
+    # the safe-output contract: no temporary left, the final names only
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model-summary.csv", "model.h5", "small.nml"]
+    cmp = compare(small_serial, tmp_path / "model.h5")
+    assert cmp.returncode == 0, f"{ranks} ranks x {threads} threads:\n" + cmp.stdout + cmp.stderr
+    assert (tmp_path / "model-summary.csv").read_bytes() == (small_serial.parent / "model-summary.csv").read_bytes()
+    with h5py.File(tmp_path / "model.h5", "r") as f:
+        assert int(f["run"].attrs["threads"]) == threads
+
+
+def test_mpi_parallel_file_is_read_by_the_serial_readers(mpi_bin, anm_bin, shapes_dir, small_serial, tmp_path):
+    """The file written by 3 ranks through parallel HDF5: h5py reads the same arrays as from the
+    serial file; anm_post reads and validates it; the serial program's reader audits it (`anm
+    verify`, which validates the file on reading) with the serial file's report."""
+    from anm_post import read_model
+    nml = tmp_path / "small.nml"
+    nml.write_text(SMALL_NML.format(shapes=shapes_dir, out=tmp_path))
+    res = run_mpi(mpi_bin, 3, 1, ["run", str(nml)])
+    assert res.returncode == 0, res.stdout + res.stderr
+    par = tmp_path / "model.h5"
+    with h5py.File(par, "r") as f, h5py.File(small_serial, "r") as g:
+        assert f.attrs["format"] == g.attrs["format"]
+        for name in ("particles/center", "particles/rotation", "particles/shell_thickness", "particles/shape"):
+            a, b = f[name], g[name]
+            assert a.dtype == b.dtype and a.shape == b.shape and a[()].tobytes() == b[()].tobytes(), name
+    model = read_model(par)
+    assert len(model.center) == len(read_model(small_serial).center) > 600
+    reports = []
+    for path in (small_serial, par):
+        v = subprocess.run([anm_bin, "verify", str(path), "--resolution", "24"], capture_output=True, text=True)
+        assert v.returncode == 0, v.stdout + v.stderr
+        reports.append(v.stdout.split("\n", 1)[1])
+    assert reports[0] == reports[1]
+
+
+def write_spheres(path, centers, radii, box, periodic):
+    """A contract-v1 model of spheres of one shape (order 0) with per-particle scales, from h5py."""
+    n = len(centers)
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = np.bytes_("anm-model")
+        f.attrs["format_version"] = np.int32(1)
+        f.create_dataset("box/length", data=np.array(box, dtype=np.float64))
+        f["box"].attrs["periodic"] = np.int32(1 if periodic else 0)
+        coeffs = np.zeros((1, 1, 2))
+        coeffs[0, 0, 0] = 2.0 * math.sqrt(math.pi)
+        f.create_dataset("shapes/coeffs", data=coeffs)
+        f.create_dataset("shapes/nmax", data=np.zeros(1, dtype=np.int32))
+        f.create_dataset("shapes/name", data=np.array([b"sphere"], dtype="S16"))
+        f.create_dataset("particles/shape", data=np.zeros(n, dtype=np.int32))
+        f.create_dataset("particles/center", data=np.asarray(centers, dtype=np.float64))
+        rot = np.zeros((n, 3, 3))
+        rot[:] = np.eye(3)
+        f.create_dataset("particles/rotation", data=rot)
+        f.create_dataset("particles/scale", data=np.asarray(radii, dtype=np.float64))
+        f.create_dataset("particles/nmax", data=np.zeros(n, dtype=np.int32))
+        f.create_dataset("particles/sieve", data=np.zeros(n, dtype=np.int32))
+        for name, val in [("min_width", 0.4), ("max_width", 1.0), ("target_fraction", 0.1), ("achieved_fraction", 0.1)]:
+            f.create_dataset(f"sieves/{name}", data=np.array([val]))
+        f.create_dataset("sieves/count", data=np.array([n], dtype=np.int32))
+        f.create_dataset("run/namelist", data=np.bytes_("written by the test"))
+
+
+@pytest.mark.parametrize("periodic", [False, True], ids=["walls", "periodic"])
+def test_mpi_verify_reports_the_serial_audit(periodic, mpi_bin, anm_bin, tmp_path):
+    """Spheres of several sizes at random in a 10 mm box, many overlapping (pairs across slab
+    borders and periodic images included) and, with walls, crossing them: `anm verify` on 2 and 3
+    ranks prints the serial report line by line (pairs, overlaps, walls, the largest penetration
+    and the deepest pair) and exits with its status."""
+    rng = np.random.default_rng(7)
+    n = 300
+    centers = rng.uniform(0.0, 10.0, (n, 3))
+    radii = rng.uniform(0.2, 0.5, n)
+    path = tmp_path / "spheres.h5"
+    write_spheres(path, centers, radii, [10.0, 10.0, 10.0], periodic)
+    args = ["verify", str(path), "--resolution", "16"]
+    serial = subprocess.run([anm_bin] + args, capture_output=True, text=True, env=dict(os.environ, OMP_NUM_THREADS="2"))
+    assert serial.returncode == 3 and "FAIL" in serial.stdout, serial.stdout + serial.stderr
+    assert "deepest pair" in serial.stdout
+    for ranks in (2, 3):
+        res = run_mpi(mpi_bin, ranks, 1, args)
+        assert res.returncode == 3, res.stdout + res.stderr
+        assert res.stdout == serial.stdout, f"{ranks} ranks"

@@ -25,6 +25,12 @@
 !> part in at least `min_filter_ends` pairs (a body costs about as much as sampling 1,000 near
 !> pairs of sand grains); the report is the same either way but for `pairs_cleared`.
 !>
+!> Distributed (the MPI build): with a `verify_split_type`, process r of n audits the pairs whose
+!> later particle (the loop index, p >= q) has its centre in the slab r of n equal slabs along x,
+!> and the walls of those particles; `reduce` then combines the reports of all processes, which
+!> are the serial report (counts summed, the largest penetration and its pair from the process
+!> that found it).
+!>
 !> Usage:
 !>     call verify_model(model, 120, report)
 module anm_audit_verify
@@ -38,7 +44,7 @@ module anm_audit_verify
    implicit none
    private
 
-   public :: verify_report_type, verify_model, verify_memory
+   public :: verify_report_type, verify_model, verify_memory, verify_split_type, owner_slab
 
    !> Result of an audit.
    type :: verify_report_type
@@ -52,13 +58,34 @@ module anm_audit_verify
       integer :: wall_violations = 0
       !> Largest penetration found (mm), between particles or through a wall.
       real(wp) :: max_depth = 0.0_wp
-      !> Particles of the worst pair between particles (0 if none).
+      !> Particles of the worst pair between particles (0 if none) and its penetration (mm).
       integer :: worst(2) = 0
+      real(wp) :: worst_depth = 0.0_wp
       !> Tolerance used (mm).
       real(wp) :: tolerance = 0.0_wp
       !> Directions sampled per particle.
       integer :: samples = 0
    end type verify_report_type
+
+   !> The processes that audit one model together (the MPI build extends it: mpi/src/verify.f90):
+   !> this process audits the pairs of its slab, and `reduce` combines the reports.
+   type, abstract :: verify_split_type
+      !> This process and the number of processes.
+      integer :: rank = 0, nranks = 1
+   contains
+      !> The report of all processes from each one's (collective; the same on every process).
+      procedure(split_reduce), deferred :: reduce
+   end type verify_split_type
+
+   abstract interface
+      subroutine split_reduce(self, report)
+         import :: verify_split_type, verify_report_type
+         !> Processes.
+         class(verify_split_type), intent(in) :: self
+         !> This process' report on entry, the combined one on return.
+         type(verify_report_type), intent(inout) :: report
+      end subroutine split_reduce
+   end interface
 
    !> Per (shape, order): surface sampled on a latitude-longitude grid of cell centres
    !> theta_i = pi (i - 1/2)/nt, phi_j = 2 pi (j - 1/2)/np, and the bounding radius (shape units).
@@ -84,7 +111,7 @@ contains
 
    !> Audit `model` at `resolution` polar samples; penetrations deeper than `tolerance` mm
    !> (default 1e-4 of the smallest sieve width) count as overlaps.
-   subroutine verify_model(model, resolution, report, tolerance, prune, filter)
+   subroutine verify_model(model, resolution, report, tolerance, prune, filter, split)
       !> Model.
       type(model_type), intent(in) :: model
       !> Polar samples per particle (azimuthal: twice as many).
@@ -100,6 +127,8 @@ contains
       !> false: sample every pair whose bounding spheres intersect; default: for the (shape, order)
       !> pairs that take part in at least min_filter_ends pairs).
       logical, intent(in), optional :: filter
+      !> Processes auditing the model together (each its slab; the report combined).
+      class(verify_split_type), intent(in), optional :: split
       type(sampled_type), allocatable :: samp(:)
       type(contact_body_type), allocatable :: bodies(:)
       logical, allocatable :: has_body(:)
@@ -113,7 +142,14 @@ contains
       integer :: nwall
       logical :: pruned, filtered
       integer, allocatable :: ends(:)
+      integer :: rank, nranks
 
+      rank = 0
+      nranks = 1
+      if (present(split)) then
+         rank = split%rank
+         nranks = split%nranks
+      end if
       pruned = .true.
       if (present(prune)) pruned = prune
       filtered = .true.
@@ -167,20 +203,24 @@ contains
       worst_depth = 0.0_wp
       nwall = 0
       !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned, bodies, has_body, &
-      !$omp& cparams) private(p) reduction(+:npairs, nover, nwall, ncleared) reduction(max:depth_max)
+      !$omp& cparams, rank, nranks) private(p) reduction(+:npairs, nover, nwall, ncleared) reduction(max:depth_max)
       block
          integer, allocatable :: cand(:)
          real(wp), allocatable :: shift(:, :)
          real(wp), allocatable :: cw(:, :)
          integer :: ncand, i, q
-         real(wp) :: d, dw
+         real(wp) :: d, dw, pair_max
          logical :: hit
+         pair_max = 0.0_wp
          allocate (cw(3, model%np))
          do i = 1, model%np
             cw(:, i) = wrap(model, model%center(:, i))
          end do
          !$omp do schedule(dynamic, 16)
          do p = 1, model%np
+            if (nranks > 1) then
+               if (owner_slab(cw(1, p), model%box(1), nranks) /= rank) cycle
+            end if
             if (.not. model%periodic) then
                dw = wall_depth(model, samp, key, p)
                if (dw > report%tolerance) nwall = nwall + 1
@@ -211,8 +251,10 @@ contains
                d = max(pair_depth(model, samp, key, rho, pruned, p, cw(:, p), q, cw(:, q) + shift(:, i)), &
                        pair_depth(model, samp, key, rho, pruned, q, cw(:, q) + shift(:, i), p, cw(:, p)))
                if (d > report%tolerance) nover = nover + 1
-               if (d > depth_max) then
-                  depth_max = d
+               if (d > depth_max) depth_max = d
+               ! the deepest pair between particles (walls apart, which depth_max also holds)
+               if (d > pair_max) then
+                  pair_max = d
                   !$omp critical (verify_worst)
                   if (d > worst_depth) then
                      worst_depth = d
@@ -230,7 +272,19 @@ contains
       report%overlapping_pairs = nover
       report%wall_violations = nwall
       report%max_depth = depth_max
+      report%worst_depth = worst_depth
+      if (present(split)) call split%reduce(report)
    end subroutine verify_model
+
+   !> The slab (0 .. nslab - 1) of n equal slabs along an edge of length `length` holding
+   !> coordinate x (wrapped into the box).
+   pure integer function owner_slab(x, length, nslab) result(r)
+      !> Coordinate (mm) and edge length (mm).
+      real(wp), intent(in) :: x, length
+      !> Number of slabs.
+      integer, intent(in) :: nslab
+      r = max(0, min(nslab - 1, int(x / length * nslab)))
+   end function owner_slab
 
    !> Per (shape, order): the number of pair ends (pairs whose bounding spheres intersect, each
    !> counted for both particles' (shape, order)).

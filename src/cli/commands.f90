@@ -17,7 +17,7 @@ module anm_cli_commands
    use anm_shapes_nist, only: write_nist_shape
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
    use anm_io_model, only: model_type, read_model
-   use anm_audit_verify, only: verify_report_type, verify_model, verify_memory
+   use anm_audit_verify, only: verify_report_type, verify_model, verify_memory, verify_split_type
    use anm_core_resources, only: check_memory, shape_memory
    use anm_sh_expansion, only: sh_expansion_type
    use anm_contact_studies, only: study_next, study_nbox
@@ -238,7 +238,9 @@ contains
    end subroutine synth_command
 
    !> `anm verify MODEL.h5 [--resolution N] [--tolerance MM] [--independent]`: the overlap audit of a model.
-   subroutine verify_command(args, unit, status, error)
+   !> With `split` (the MPI build), every process audits its slab of the model and process 0
+   !> writes the combined report (docs/mpi.md).
+   subroutine verify_command(args, unit, status, error, split)
       !> Arguments after the command name.
       type(string_type), intent(in) :: args(:)
       !> Output unit of the report.
@@ -247,6 +249,8 @@ contains
       integer, intent(out) :: status
       !> Error naming the option, argument or file.
       type(error_type), allocatable, intent(out) :: error
+      !> Processes auditing the model together.
+      class(verify_split_type), intent(in), optional :: split
       character(len=:), allocatable :: path, arg
       integer :: i, resolution
       real(wp) :: tol
@@ -298,13 +302,17 @@ contains
       ! the default tolerance is verify_model's own (1e-4 of the smallest sieve width)
       if (.not. have_tol) tol = 1.0e-4_wp * minval(model%min_width)
       if (independent) then
-         call verify_model(model, resolution, rep, tol, filter=.false.)
+         call verify_model(model, resolution, rep, tol, filter=.false., split=split)
       else if (have_tol) then
-         call verify_model(model, resolution, rep, tol)
+         call verify_model(model, resolution, rep, tol, split=split)
       else
-         call verify_model(model, resolution, rep)
+         call verify_model(model, resolution, rep, split=split)
       end if
-      call write_verify_report(unit, path, model, rep)
+      if (present(split)) then
+         if (split%rank == 0) call write_verify_report(unit, path, model, rep)
+      else
+         call write_verify_report(unit, path, model, rep)
+      end if
       if (rep%overlapping_pairs > 0 .or. rep%wall_violations > 0) status = verify_failed
    end subroutine verify_command
 

@@ -21,6 +21,7 @@ module anm_cli_run
    use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_summary, only: write_summary, write_summary_csv_file
    use anm_io_model, only: model_type, write_model_file, read_model
+   use anm_io_hdf5, only: h5_parallel_type
    use anm_io_vrml, only: vrml_mesh_type, write_vrml_file
    use anm_sh_expansion, only: sh_truncate
    implicit none
@@ -147,7 +148,7 @@ contains
    end subroutine rerun_command
 
    !> Run the job of a namelist file.
-   subroutine run_job(path, out_unit, progress_unit, error, threads, force, directory, dist)
+   subroutine run_job(path, out_unit, progress_unit, error, threads, force, directory, dist, par)
       !> Namelist file.
       character(len=*), intent(in) :: path
       !> Unit for the summary table.
@@ -165,6 +166,10 @@ contains
       !> The MPI build: phase 1 spread over the processes, which all park the same model; only
       !> the writer checks the output folder, prints progress and writes the outputs.
       class(phase1_distributor_type), intent(in), optional :: dist
+      !> The MPI build with parallel HDF5 (with `dist`): every process writes the model file
+      !> together (collectively, to the writer's temporary name); the writer renames it once all
+      !> have closed it, and writes the summary and VRML alone.
+      class(h5_parallel_type), intent(in), optional :: par
       type(run_config_type) :: cfg
       type(model_type) :: model
       type(string_type), allocatable :: outputs(:), stale(:)
@@ -181,6 +186,16 @@ contains
       if (present(dist)) then
          if (.not. dist%writer) then
             call run_parking(cfg, model, kinds, kind_of, error, dist=dist)
+            if (allocated(error)) return
+            if (present(par)) then
+               ! the writer's temporary name, then the collective write and the writer's rename
+               call finish_model(cfg, model, threads)
+               call agree_model(model, dist)
+               call par%share(tmp)
+               call write_model_file(tmp, model, error, par=par)
+               if (allocated(error)) return
+               call par%barrier()
+            end if
             return
          end if
       end if
@@ -227,17 +242,20 @@ contains
       call remove_stale_temps(dir)
       call run_parking(cfg, model, kinds, kind_of, error, progress_unit, dist=dist)
       if (allocated(error)) return
-      model%version = anm_version
-      ! the shell specification travels with the model (/shells)
-      model%layer_thickness = cfg%shells%thickness
-      model%layer_colour = cfg%shells%colour
-      model%layer_unit = thickness_unit_keyword(cfg%shells%unit)
-      model%layer_mode = shell_mode_name(cfg%shells%mode)
-      if (present(threads)) model%threads = threads
+      call finish_model(cfg, model, threads)
       ! every output to a temporary name first; renamed together once all are complete
       call set%add(base//".h5", tmp)
-      call write_model_file(tmp, model, error, shown=base//".h5")
-      if (allocated(error)) goto 99
+      if (present(par) .and. present(dist)) then
+         ! all processes write the file together; renamed (commit) once every one has closed it
+         call agree_model(model, dist)
+         call par%share(tmp)
+         call write_model_file(tmp, model, error, shown=base//".h5", par=par)
+         if (allocated(error)) goto 99
+         call par%barrier()
+      else
+         call write_model_file(tmp, model, error, shown=base//".h5")
+         if (allocated(error)) goto 99
+      end if
       call set%add(base//"-summary.csv", tmp)
       call write_summary_csv_file(tmp, model, error, shown=base//"-summary.csv")
       if (allocated(error)) goto 99
@@ -267,6 +285,30 @@ contains
       return
 99    call set%discard()
    end subroutine run_job
+
+   !> The run's attributes of the model: program version, shell specification, threads.
+   subroutine finish_model(cfg, model, threads)
+      type(run_config_type), intent(in) :: cfg
+      type(model_type), intent(inout) :: model
+      integer, intent(in), optional :: threads
+      model%version = anm_version
+      ! the shell specification travels with the model (/shells)
+      model%layer_thickness = cfg%shells%thickness
+      model%layer_colour = cfg%shells%colour
+      model%layer_unit = thickness_unit_keyword(cfg%shells%unit)
+      model%layer_mode = shell_mode_name(cfg%shells%mode)
+      if (present(threads)) model%threads = threads
+   end subroutine finish_model
+
+   !> The run attributes that differ between processes (wall time, threads) made the largest over
+   !> them, so that every process writes the same attributes into a file written together
+   !> (collective).
+   subroutine agree_model(model, dist)
+      type(model_type), intent(inout) :: model
+      class(phase1_distributor_type), intent(in) :: dist
+      model%wall_time = dist%agree(model%wall_time)
+      model%threads = nint(dist%agree(real(model%threads, wp)))
+   end subroutine agree_model
 
    !> The files a run writes for the output base name (DIR/NAME): the model, the summary and the
    !> VRML file, or one VRML file per layer.

@@ -23,7 +23,48 @@ module anm_io_hdf5
    private
 
    public :: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, h5_read, &
-      & h5_read_attr, h5_dims, h5_exists, h5_read_strings
+      & h5_read_attr, h5_dims, h5_exists, h5_read_strings, h5_parallel_type
+
+   !> The processes that write one file together (parallel HDF5, MPI-IO): the MPI build extends it
+   !> (mpi/src/output.f90); the serial program uses none. Every process makes the same calls with
+   !> the same arguments (metadata, attributes); the data of a dataset is written by process 0
+   !> alone, or, for datasets written with `split`, each process writing a contiguous block of the
+   !> last dimension (a hyperslab), collectively.
+   type, abstract :: h5_parallel_type
+      !> This process and the number of processes.
+      integer :: rank = 0, nranks = 1
+   contains
+      !> New file-access (MPI-IO driver) and transfer (collective) property lists.
+      procedure(parallel_lists), deferred :: property_lists
+      !> The text of process 0 on every process (collective).
+      procedure(parallel_share), deferred :: share
+      !> Wait for every process (collective).
+      procedure(parallel_barrier), deferred :: barrier
+   end type h5_parallel_type
+
+   abstract interface
+      subroutine parallel_lists(self, fapl, dxpl)
+         import :: h5_parallel_type, hid_t
+         !> Processes.
+         class(h5_parallel_type), intent(in) :: self
+         !> File-access and data-transfer property lists (the caller closes them).
+         integer(hid_t), intent(out) :: fapl, dxpl
+      end subroutine parallel_lists
+
+      subroutine parallel_share(self, text)
+         import :: h5_parallel_type
+         !> Processes.
+         class(h5_parallel_type), intent(in) :: self
+         !> Process 0's text on entry there; on return, the same on every process.
+         character(len=:), allocatable, intent(inout) :: text
+      end subroutine parallel_share
+
+      subroutine parallel_barrier(self)
+         import :: h5_parallel_type
+         !> Processes.
+         class(h5_parallel_type), intent(in) :: self
+      end subroutine parallel_barrier
+   end interface
 
    !> An open HDF5 file.
    type :: h5_file_type
@@ -35,6 +76,11 @@ module anm_io_hdf5
       integer(hid_t) :: dcpl = -1, gcpl = -1
       !> Built in memory (HDF5's core driver) and written to `name` by h5_close.
       logical :: in_memory = .false.
+      !> Written by several processes together (h5_parallel_type): this process, their number and
+      !> the collective transfer property list.
+      logical :: parallel = .false.
+      integer :: rank = 0, nranks = 1
+      integer(hid_t) :: dxpl = -1
    end type h5_file_type
 
    !> A string read from a file.
@@ -50,7 +96,9 @@ module anm_io_hdf5
       end function c_strlen
    end interface
 
-   !> Write a dataset (float64 or int32 arrays of rank 1-3, or a string).
+   !> Write a dataset (float64 or int32 arrays of rank 1-3, or a string). In a file written in
+   !> parallel (h5_create with `par`), `split = .true.` makes each process write its block of the
+   !> last dimension (every process passes the whole array); without it process 0 writes it all.
    interface h5_write
       module procedure :: write_real1, write_real2, write_real3, write_int1, write_string, write_strings
    end interface h5_write
@@ -83,7 +131,10 @@ contains
    !> written to disk by h5_close with checked writes: a full disk or a file-size limit is then an
    !> error of h5_close, and HDF5 never holds a half-written file (which it would try to flush
    !> again, and crash, at program exit).
-   subroutine h5_create(file, name, error)
+   !>
+   !> With `par` (the MPI build), every process of `par` creates the same file collectively through
+   !> MPI-IO, written directly (no memory image); h5_close is then collective too.
+   subroutine h5_create(file, name, error, par)
       use hdf5, only: h5pset_fapl_core_f, H5P_FILE_ACCESS_F, H5P_DEFAULT_F
       !> Handle.
       type(h5_file_type), intent(out) :: file
@@ -91,20 +142,37 @@ contains
       character(len=*), intent(in) :: name
       !> Error.
       type(error_type), allocatable, intent(out) :: error
+      !> Processes writing the file together (collective create).
+      class(h5_parallel_type), intent(in), optional :: par
       integer :: st, s2
       integer(hid_t) :: fapl
       file%name = name
       call h5open_f(st)
       call h5eset_auto_f(0, st)
-      call h5pcreate_f(H5P_FILE_ACCESS_F, fapl, st)
-      call h5pset_fapl_core_f(fapl, int(4 * 1024 * 1024, size_t), .false., st)
-      call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st, H5P_DEFAULT_F, fapl)
-      call h5pclose_f(fapl, s2)
-      if (st /= 0) then
-         call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
-         return
+      if (present(par)) then
+         call par%property_lists(fapl, file%dxpl)
+         call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st, H5P_DEFAULT_F, fapl)
+         call h5pclose_f(fapl, s2)
+         if (st /= 0) then
+            call h5pclose_f(file%dxpl, s2)
+            file%dxpl = -1
+            call fatal_error(error, name//": cannot create HDF5 file (parallel HDF5)", error_code%io)
+            return
+         end if
+         file%parallel = .true.
+         file%rank = par%rank
+         file%nranks = par%nranks
+      else
+         call h5pcreate_f(H5P_FILE_ACCESS_F, fapl, st)
+         call h5pset_fapl_core_f(fapl, int(4 * 1024 * 1024, size_t), .false., st)
+         call h5fcreate_f(name, H5F_ACC_TRUNC_F, file%id, st, H5P_DEFAULT_F, fapl)
+         call h5pclose_f(fapl, s2)
+         if (st /= 0) then
+            call fatal_error(error, name//": cannot create HDF5 file", error_code%io)
+            return
+         end if
+         file%in_memory = .true.
       end if
-      file%in_memory = .true.
       call h5pcreate_f(H5P_DATASET_CREATE_F, file%dcpl, st)
       call h5pset_obj_track_times_f(file%dcpl, .false., st)
       call h5pcreate_f(H5P_GROUP_CREATE_F, file%gcpl, st)
@@ -148,8 +216,10 @@ contains
       character(len=512) :: msg
       if (file%dcpl >= 0) call h5pclose_f(file%dcpl, st)
       if (file%gcpl >= 0) call h5pclose_f(file%gcpl, st)
+      if (file%dxpl >= 0) call h5pclose_f(file%dxpl, st)
       file%dcpl = -1
       file%gcpl = -1
+      file%dxpl = -1
       if (file%in_memory) then
          call h5fflush_f(file%id, H5F_SCOPE_GLOBAL_F, st)
          p = c_null_ptr
@@ -249,57 +319,119 @@ contains
       if (st /= 0) call fail(error, file, path, "write failed")
    end subroutine finish
 
-   subroutine write_real1(file, path, x, error)
+   subroutine write_real1(file, path, x, error, split)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:)
       type(error_type), allocatable, intent(out) :: error
+      logical, intent(in), optional :: split
       integer(hid_t) :: dset, space
       integer :: st
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      if (file%parallel) then
+         call select_part(file, space, shape(x, hsize_t), split, st)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real1
 
-   subroutine write_real2(file, path, x, error)
+   subroutine write_real2(file, path, x, error, split)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:, :)
       type(error_type), allocatable, intent(out) :: error
+      logical, intent(in), optional :: split
       integer(hid_t) :: dset, space
       integer :: st
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      if (file%parallel) then
+         call select_part(file, space, shape(x, hsize_t), split, st)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real2
 
-   subroutine write_real3(file, path, x, error)
+   subroutine write_real3(file, path, x, error, split)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:, :, :)
       type(error_type), allocatable, intent(out) :: error
+      logical, intent(in), optional :: split
       integer(hid_t) :: dset, space
       integer :: st
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      if (file%parallel) then
+         call select_part(file, space, shape(x, hsize_t), split, st)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
+      end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real3
 
-   subroutine write_int1(file, path, x, error)
+   subroutine write_int1(file, path, x, error, split)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       integer, intent(in) :: x(:)
       type(error_type), allocatable, intent(out) :: error
+      logical, intent(in), optional :: split
       integer(hid_t) :: dset, space
       integer :: st
       call make_dataset(file, path, H5T_NATIVE_INTEGER, shape(x, hsize_t), dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
+      if (file%parallel) then
+         call select_part(file, space, shape(x, hsize_t), split, st)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
+      end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_int1
+
+   !> This process' part of a dataset of shape `dims` written in parallel, selected in `space` (used
+   !> as both the memory and the file dataspace: every process holds the whole array): with
+   !> `split`, the contiguous block lo+1..hi of the last dimension, lo = n rank / nranks; otherwise
+   !> everything on process 0 and nothing on the others.
+   subroutine select_part(file, space, dims, split, st)
+      use hdf5, only: h5sselect_none_f, h5sselect_hyperslab_f, H5S_SELECT_SET_F
+      type(h5_file_type), intent(in) :: file
+      integer(hid_t), intent(in) :: space
+      integer(hsize_t), intent(in) :: dims(:)
+      logical, intent(in), optional :: split
+      integer, intent(out) :: st
+      integer(hsize_t) :: offset(size(dims)), count(size(dims)), n, lo, hi
+      logical :: by_block
+      st = 0
+      by_block = .false.
+      if (present(split)) by_block = split .and. size(dims) > 0
+      if (.not. by_block) then
+         if (file%rank /= 0) call h5sselect_none_f(space, st)
+         return
+      end if
+      n = dims(size(dims))
+      lo = n * file%rank / file%nranks
+      hi = n * (file%rank + 1) / file%nranks
+      if (hi <= lo) then
+         call h5sselect_none_f(space, st)
+         return
+      end if
+      offset = 0
+      count = dims
+      offset(size(dims)) = lo
+      count(size(dims)) = hi - lo
+      call h5sselect_hyperslab_f(space, H5S_SELECT_SET_F, offset, count, st)
+   end subroutine select_part
 
    subroutine string_type(len, dtype)
       integer, intent(in) :: len
@@ -320,7 +452,13 @@ contains
       call string_type(len(text), dtype)
       call make_dataset(file, path, dtype, none, dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, dtype, text, [1_hsize_t], st)
+      if (file%parallel) then
+         call select_part(file, space, none, .false., st)
+         if (st == 0) call h5dwrite_f(dset, dtype, text, [1_hsize_t], st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, dtype, text, [1_hsize_t], st)
+      end if
       call h5tclose_f(dtype, st)
       call finish(file, path, st, dset, space, error)
    end subroutine write_string
@@ -335,7 +473,13 @@ contains
       call string_type(len(text), dtype)
       call make_dataset(file, path, dtype, shape(text, hsize_t), dset, space, error)
       if (allocated(error)) return
-      call h5dwrite_f(dset, dtype, text, shape(text, hsize_t), st)
+      if (file%parallel) then
+         call select_part(file, space, shape(text, hsize_t), .false., st)
+         if (st == 0) call h5dwrite_f(dset, dtype, text, shape(text, hsize_t), st, mem_space_id=space, &
+                                      file_space_id=space, xfer_prp=file%dxpl)
+      else
+         call h5dwrite_f(dset, dtype, text, shape(text, hsize_t), st)
+      end if
       call h5tclose_f(dtype, st)
       call finish(file, path, st, dset, space, error)
    end subroutine write_strings

@@ -16,7 +16,7 @@ module anm_io_model
    use anm_sh_expansion, only: sh_expansion_type, sh_from_rows, sh_to_rows
    use anm_io_model_schema, only: model_schema
    use anm_io_hdf5, only: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, &
-      & h5_read, h5_read_attr, h5_exists, h5_read_strings
+      & h5_read, h5_read_attr, h5_exists, h5_read_strings, h5_parallel_type
    implicit none
    private
 
@@ -105,8 +105,11 @@ contains
    end subroutine write_model
 
    !> Write the model file `path` directly (the caller chooses a temporary name: see write_model).
-   !> Errors name `shown` (default: path) and the dataset.
-   subroutine write_model_file(path, model, error, shown)
+   !> Errors name `shown` (default: path) and the dataset. With `par` (the MPI build), every process
+   !> calls it with the same model and name and the file is written collectively through parallel
+   !> HDF5: each process writes a block of the /particles datasets, process 0 the rest; the layout
+   !> and the content are those of the serial file.
+   subroutine write_model_file(path, model, error, shown, par)
       !> Model file name.
       character(len=*), intent(in) :: path
       !> Model.
@@ -115,6 +118,8 @@ contains
       type(error_type), allocatable, intent(out) :: error
       !> Name used in messages (the final name when writing a temporary).
       character(len=*), intent(in), optional :: shown
+      !> Processes writing the file together (collective).
+      class(h5_parallel_type), intent(in), optional :: par
       type(h5_file_type) :: f
       type(error_type), allocatable :: err2
       real(wp), allocatable :: coeffs(:, :, :), rot(:, :, :)
@@ -122,7 +127,7 @@ contains
       integer, allocatable :: nmax(:)
       integer :: ns, ncoef, s, n, m, k, p, nmx
 
-      call h5_create(f, path, error)
+      call h5_create(f, path, error, par)
       if (allocated(error)) goto 98
       call h5_write_attr(f, "/", "format", "anm-model", error)
       if (allocated(error)) goto 99
@@ -158,26 +163,26 @@ contains
 
       call h5_group(f, "/particles", error)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/shape", model%shape(:model%np) - 1, error)
+      call h5_write(f, "/particles/shape", model%shape(:model%np) - 1, error, split=.true.)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/center", model%center(:, :model%np), error)
+      call h5_write(f, "/particles/center", model%center(:, :model%np), error, split=.true.)
       if (allocated(error)) goto 99
       ! numpy reads (np, 3, 3) with R[p, i, j] = file(j, i, p) in Fortran order: store the transpose
       allocate (rot(3, 3, model%np))
       do p = 1, model%np
          rot(:, :, p) = transpose(model%rotation(:, :, p))
       end do
-      call h5_write(f, "/particles/rotation", rot, error)
+      call h5_write(f, "/particles/rotation", rot, error, split=.true.)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/scale", model%scale(:model%np), error)
+      call h5_write(f, "/particles/scale", model%scale(:model%np), error, split=.true.)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/nmax", model%nmax(:model%np), error)
+      call h5_write(f, "/particles/nmax", model%nmax(:model%np), error, split=.true.)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/sieve", model%sieve(:model%np) - 1, error)
+      call h5_write(f, "/particles/sieve", model%sieve(:model%np) - 1, error, split=.true.)
       if (allocated(error)) goto 99
       if (allocated(model%shell_thickness)) then
          if (size(model%shell_thickness, 1) > 0) then
-            call h5_write(f, "/particles/shell_thickness", model%shell_thickness(:, :model%np), error)
+            call h5_write(f, "/particles/shell_thickness", model%shell_thickness(:, :model%np), error, split=.true.)
             if (allocated(error)) goto 99
          end if
       end if
