@@ -22,7 +22,7 @@ module anm_parking_engine
    use anm_config_parking, only: parking_strategy
    use anm_shells_thickness, only: thickness_to_mm
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, &
-      & cache_environment
+      & cache_environment, kind_bytes, body_bytes
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
@@ -97,7 +97,7 @@ contains
       end select
       if (allocated(error)) return
       call system_clock(t1)
-      call cache_line(ks, progress_unit)
+      call cache_line(ks, pk%kinds, progress_unit)
       ! the VRML output draws every kind
       if (cfg%output%vrml) then
          call ks%build(pk%kinds, [(s, s=1, size(pk%kinds))], error)
@@ -160,12 +160,29 @@ contains
       end do
    end subroutine load_sources
 
-   !> One line about the kinds built and the on-disk cache (when it is on or could not be used).
-   subroutine cache_line(ks, unit)
+   !> Lines about the kinds built (with shells: their number and memory) and the on-disk cache
+   !> (when it is on or could not be used).
+   subroutine cache_line(ks, kinds, unit)
       type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(in) :: kinds(:)
       integer, intent(in), optional :: unit
+      integer(i8) :: total, shell
+      integer :: k, n
       if (.not. present(unit)) return
       if (unit < 0) return
+      if (ks%p%nlayer > 0) then
+         total = 0
+         shell = 0
+         n = count(ks%built)
+         do k = 1, size(kinds)
+            if (.not. ks%built(k)) cycle
+            total = total + kind_bytes(kinds(k))
+            if (allocated(kinds(k)%shell_body)) shell = shell + body_bytes(kinds(k)%shell_body)
+         end do
+         write (unit, '(a,i0,a,i0,a,f0.2,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
+            real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (shell contact body ", &
+            real(shell, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
+      end if
       if (ks%cache%on) then
          write (unit, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') "kinds: ", ks%bases_built, " bases and ", ks%shells_built, &
             " shells built; cache "//ks%cache%dir//": ", ks%cache%hits, " read, ", ks%cache%written, " written, ", &

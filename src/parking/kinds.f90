@@ -11,7 +11,7 @@
 !>     call new_kind_set(ks, kinds, params, shapes, names, first_shape, nshape, order)
 !>     call ks%build(kinds, [(k, k = ks%first(s), ks%first(s) + ks%count(s) - 1)], error)
 module anm_parking_kinds
-   use, intrinsic :: iso_fortran_env, only: int8
+   use, intrinsic :: iso_fortran_env, only: int8, int64
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type, fatal_error
    use anm_core_filesystem, only: string_type
@@ -26,7 +26,8 @@ module anm_parking_kinds
    implicit none
    private
 
-   public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, cache_environment
+   public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, cache_environment, kind_bytes, &
+      & body_bytes
 
    !> Discrete widths per sieve when shell thickness is given in mm.
    integer, parameter :: width_levels = 8
@@ -584,6 +585,41 @@ contains
       kd%r_in_query = kd%shell_body%r_min
       if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
    end subroutine shell_radii
+
+   !> Memory held by a kind (bytes): its bodies, layers and the scalars.
+   pure integer(int64) function kind_bytes(kd) result(n)
+      !> Kind.
+      type(particle_kind_type), intent(in) :: kd
+      integer :: k
+      n = storage_size(kd) / 8 + body_bytes(kd%body)
+      if (allocated(kd%shell_body)) n = n + body_bytes(kd%shell_body)
+      if (allocated(kd%layers)) then
+         do k = 1, size(kd%layers)
+            n = n + expansion_bytes(kd%layers(k))
+         end do
+         n = n + 8 * size(kd%layer_volume)
+      end if
+   end function kind_bytes
+
+   !> Memory held by a contact body (bytes): its arrays and expansion.
+   pure integer(int64) function body_bytes(b) result(n)
+      !> Body.
+      type(contact_body_type), intent(in) :: b
+      n = storage_size(b) / 8 + expansion_bytes(b%shape) - storage_size(b%shape) / 8
+      if (allocated(b%node)) n = n + 8_int64 * (size(b%dir) + size(b%cosa) + size(b%sina) + size(b%rlo) + size(b%rhi) &
+                                               + size(b%ball) + size(b%brad) + size(b%row_ct) + size(b%row_st) &
+                                               + size(b%row_cosa) + size(b%row_sina) + size(b%col_cp) + size(b%col_sp) &
+                                               + size(b%node)) + 4_int64 * (size(b%dlo) + size(b%dhi))
+   end function body_bytes
+
+   !> Memory held by an expansion (bytes): coefficients and Legendre table.
+   pure integer(int64) function expansion_bytes(e) result(n)
+      type(sh_expansion_type), intent(in) :: e
+      n = storage_size(e) / 8
+      if (allocated(e%a)) n = n + 8_int64 * (size(e%a) + size(e%b))
+      if (allocated(e%table%ca)) n = n + 8_int64 * (size(e%table%ca) + size(e%table%cb) + size(e%table%sect)) &
+                                     + 4_int64 * size(e%table%idx)
+   end function expansion_bytes
 
    !> The on-disk cache folder from the environment: ANM_CACHE ('' when unset; 'off' disables).
    function cache_environment() result(dir)
