@@ -25,7 +25,7 @@ module anm_parking_kind_cache
    use anm_core_kinds, only: wp, sp
    use anm_core_error, only: error_type
    use anm_core_filesystem, only: join_path, make_directory
-   use anm_core_output, only: output_set_type, check_complete
+   use anm_core_output, only: output_set_type, check_complete, remove_stale_temps
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, node_size
    implicit none
@@ -129,6 +129,8 @@ contains
       call w%put(compiler_options())
       call w%put([storage_size(1.0_wp), storage_size(1.0_sp), leaf_level, stored_level, node_size])
       cache%code = w%bytes()
+      ! temporaries of runs killed while writing an entry
+      call remove_stale_temps(trim(dir))
       cache%dir = trim(dir)
       cache%on = .true.
    end subroutine new_kind_cache
@@ -148,7 +150,7 @@ contains
       call w%put(what)
    end subroutine key_start
 
-   !> 64-bit FNV-1a of a byte string.
+   !> 64-bit FNV-1a-style hash of a byte string (8 bytes a step: kind_cache.c).
    function fnv1a(b) result(h)
       !> Bytes.
       integer(int8), intent(in) :: b(:)

@@ -2,7 +2,9 @@
 !> at the sieve's order, contact body, shell layers) and the set of them for a run, built lazily
 !> (a kind is built when first needed; a kind equal to an earlier one is built once and copied;
 !> the geometry and bare contact body of a (shape, order) are built once and copied to its width
-!> levels, which differ only in their shells).
+!> levels, which differ only in their shells). With exclusion shells a kind keeps only its shell
+!> contact body's patch arrays (`bare_patches`). With p%cache_directory (ANM_CACHE) the bases and
+!> shells are read from and written to an on-disk cache (anm_parking_kind_cache, docs/shells.md).
 !>
 !> The kinds of sieve s are `first(s) .. first(s) + count(s) - 1`: `nlev` blocks (width levels,
 !> shells in mm) of the sieve's shapes.
