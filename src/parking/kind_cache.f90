@@ -57,7 +57,9 @@ module anm_parking_kind_cache
 
    !> A growing byte buffer (keys and payloads).
    type :: byte_writer_type
+      !> Storage (the first n bytes used).
       integer(int8), allocatable :: b(:)
+      !> Bytes written.
       integer(int64) :: n = 0
    contains
       procedure, private :: put_int, put_long, put_ints, put_real, put_reals, put_reals2, put_singles, put_text
@@ -69,8 +71,11 @@ module anm_parking_kind_cache
 
    !> Reading a payload back; `bad` is set (and zeros returned) on reading past its end.
    type :: byte_reader_type
+      !> The payload.
       integer(int8), allocatable :: b(:)
+      !> Bytes read so far.
       integer(int64) :: pos = 0
+      !> Set when a read went past the end (or the payload was malformed).
       logical :: bad = .false.
    contains
       procedure, private :: get_int, get_ints, get_real, get_reals, get_singles
