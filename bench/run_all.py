@@ -12,8 +12,9 @@ Usage (from the repository root; `bash scripts/benchmarks.sh` installs and build
 
 NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing, verify,
 shellsmm (verify: `anm verify` of M_sand against its parking; shellsmm: `inputs/shells_mm.nml`, its
-first sieve alone (start-up) and the whole job with and without shells; both beside the reference
-loop's time in the same run).
+first sieve alone (start-up) without and with a warm kind cache, the whole job with shells (no
+cache, warm cache) and without shells, the kinds' memory; both beside the reference loop's time in
+the same run). Every job runs with ANM_CACHE=off unless it tests the cache.
 Jobs that need ../shared/shapes (msand, table23, million with real shapes, slicing of M_sand)
 are reported as "not run" when the folder is missing.
 """
@@ -192,8 +193,9 @@ def parse_summary(text: str) -> tuple[list[tuple[int, float, float, int]], tuple
 
 
 def park(anm: str, nml: Path, tmp: Path, name: str, threads: int, edits: dict[str, str] | None = None,
-         verify: bool = True) -> Job:
-    """Run `anm run` on a copy of a namelist whose output directory is a temporary folder."""
+         verify: bool = True, cache: str = "off") -> Job:
+    """Run `anm run` on a copy of a namelist whose output directory is a temporary folder (the kind
+    cache off unless `cache` names its folder: ANM_CACHE)."""
     text = nml.read_text()
     text = re.sub(r"directory\s*=\s*'[^']*'", f"directory = '{tmp / name}'", text)
     for old, new in (edits or {}).items():
@@ -202,7 +204,8 @@ def park(anm: str, nml: Path, tmp: Path, name: str, threads: int, edits: dict[st
         text = text.replace(old, new)
     copy = tmp / f"{name}.nml"
     copy.write_text(text)
-    r = sh(f"{shlex.quote(anm)} run --force {shlex.quote(str(copy))}", env={"OMP_NUM_THREADS": str(threads)})
+    r = sh(f"{shlex.quote(anm)} run --force {shlex.quote(str(copy))}",
+           env={"OMP_NUM_THREADS": str(threads), "ANM_CACHE": cache})
     job = Job(r)
     job.sieves, total = parse_summary(r.stdout)
     if total:
@@ -358,7 +361,8 @@ def verify_section(rep: Report, anm: str, tmp: Path) -> None:
 
 
 def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
-    """inputs/shells_mm.nml: the first sieve alone (start-up), then the job with and without shells."""
+    """inputs/shells_mm.nml: the first sieve alone (start-up) without and with a warm kind cache,
+    then the job with shells (cache off, then warm) and without shells; the kinds' memory."""
     nml = ROOT / "inputs/shells_mm.nml"
     if not SHAPES.is_dir():
         rep.sections.append("### Shells in mm\n\nnot run: ../shared/shapes missing\n")
@@ -368,27 +372,55 @@ def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
              "'../shared/shapes/MA111-7-coarse', '../shared/shapes/MA111-7-coarse', '../shared/shapes/MA111-7-coarse'":
              "'../shared/shapes/MA111-7-coarse'", "order = 14, 14, 14": "order = 14"}
     noshell = {"&shells nlayer = 1, thickness = 0.1, thickness_unit = 'mm', mode = 'exclude' /": ""}
+    cache = tmp / "kind-cache"
+    shutil.rmtree(cache, ignore_errors=True)
+
+    def sieve1(j: Job) -> float:
+        m = re.search(r"sieve 1 done:.*?([\d.]+) s\s*$", j.run.stderr + j.run.stdout, re.M)
+        return float(m.group(1)) if m else float("nan")
+
+    def kinds(j: Job) -> str:
+        m = re.search(r"^kinds: \d+ of \d+ built, .*$", j.run.stderr, re.M)
+        return m.group(0) if m else "kinds: no line"
+
+    def line(label: str, j: Job) -> str:
+        return (f"{label}: {j.run.wall:.2f} s wall, {j.run.cpu:.2f} s CPU, {j.run.peak_mb:.0f} MB; "
+                f"sieve 1 done at {sieve1(j):.2f} s\n  {kinds(j)}")
+
     ref_text, _ = reference_loop(tmp)
     j1 = park(anm, nml, tmp, "shellsmm_first", 2, edits=first, verify=False)
-    m = re.search(r"sieve 1 done:.*?([\d.]+) s\s*$", j1.run.stderr + j1.run.stdout, re.M)
-    t_first = float(m.group(1)) if m else float("nan")
-    rep.target("shells in mm: first sieve (start-up), 2 threads", f"{t_first:.1f} s (whole one-sieve run "
-               f"{j1.run.wall:.1f} s)", "<= 1 s", t_first <= 1)
+    j1c = park(anm, nml, tmp, "shellsmm_first_cold", 2, edits=first, verify=False, cache=str(cache))
+    j1w = park(anm, nml, tmp, "shellsmm_first_warm", 2, edits=first, verify=False, cache=str(cache))
+    rep.target("shells in mm: first sieve (start-up), 2 threads, no cache", f"sieve done at {sieve1(j1):.1f} s, "
+               f"whole run {j1.run.cpu:.1f} s CPU", "<= 1 s", sieve1(j1) <= 1)
+    rep.target("shells in mm: first sieve (start-up), 2 threads, warm kind cache",
+               f"sieve done at {sieve1(j1w):.1f} s, whole run {j1w.run.cpu:.1f} s CPU", "<= 1 s", sieve1(j1w) <= 1)
     jw = park(anm, nml, tmp, "shellsmm", 2, verify=True)
+    jwc = park(anm, nml, tmp, "shellsmm_cached", 2, verify=False, cache=str(cache))     # fills the cache
+    jww = park(anm, nml, tmp, "shellsmm_warm", 2, verify=False, cache=str(cache))
     jn = park(anm, nml, tmp, "shellsmm_noshell", 2, edits=noshell, verify=False)
     ref2, _ = reference_loop(tmp)
     ratio = jw.run.cpu / jn.run.cpu
-    rep.target("shells in mm: CPU with / without shells", f"{jw.run.cpu:.0f} s / {jn.run.cpu:.0f} s = {ratio:.1f}",
-               "<= 2", ratio <= 2)
-    rep.target("shells in mm: peak memory", f"{jw.run.peak_mb:.0f} MB (without shells {jn.run.peak_mb:.0f} MB)",
-               "<= 1024 MB", jw.run.peak_mb <= 1024)
+    ratio_w = jww.run.cpu / jn.run.cpu
+    rep.target("shells in mm: CPU with / without shells, no cache", f"{jw.run.cpu:.0f} s / {jn.run.cpu:.0f} s = "
+               f"{ratio:.1f}", "<= 2", ratio <= 2)
+    rep.target("shells in mm: CPU with / without shells, warm kind cache", f"{jww.run.cpu:.0f} s / {jn.run.cpu:.0f} s "
+               f"= {ratio_w:.1f}", "<= 2", ratio_w <= 2)
+    rep.target("shells in mm: peak memory", f"{jw.run.peak_mb:.0f} MB (warm cache {jww.run.peak_mb:.0f} MB, "
+               f"without shells {jn.run.peak_mb:.0f} MB)", "<= 1024 MB", max(jw.run.peak_mb, jww.run.peak_mb) <= 1024)
+    models = f"models: no cache vs warm cache {same_model(jw, jww)}; first sieve no cache vs warm {same_model(j1, j1w)}"
     rep.sections.append(block("Shells in mm (`inputs/shells_mm.nml`)", "OMP_NUM_THREADS=2 anm run inputs/shells_mm.nml "
-                              "(and its first sieve alone, and without the &shells line)",
-                              f"first sieve alone: {j1.run.wall:.2f} s wall, {j1.run.cpu:.2f} s CPU, "
-                              f"{j1.run.peak_mb:.0f} MB; sieve 1 done at {t_first:.2f} s\n"
-                              f"with shells:    {job_row('shells_mm', 2, jw)}\n  CPU {jw.run.cpu:.1f} s\n"
+                              "(and its first sieve alone, and without the &shells line; ANM_CACHE=off or a "
+                              "temporary folder)",
+                              line("first sieve alone, no cache", j1) + "\n"
+                              + line("first sieve alone, cache filled", j1c) + "\n"
+                              + line("first sieve alone, warm cache", j1w) + "\n"
+                              + f"with shells, no cache:    {job_row('shells_mm', 2, jw)}\n  CPU {jw.run.cpu:.1f} s; "
+                              f"{kinds(jw)}\n"
+                              f"with shells, cache filled: CPU {jwc.run.cpu:.1f} s, {jwc.run.peak_mb:.0f} MB\n"
+                              f"with shells, warm cache:  {job_row('shells_mm', 2, jww)}\n  CPU {jww.run.cpu:.1f} s\n"
                               f"without shells: {job_row('shells_mm without shells', 2, jn)}\n  CPU {jn.run.cpu:.1f} s\n"
-                              + ref_text + "\n" + ref2))
+                              + models + "\n" + ref_text + "\n" + ref2))
 
 
 def rsa_section(rep: Report, anm: str, tmp: Path, rows: list[str], speedups: dict) -> None:

@@ -19,6 +19,7 @@ program tester
    use test_cli, only: collect_cli
    use test_api, only: collect_api
    use test_dense, only: collect_dense
+   use test_kind_cache, only: collect_kind_cache
    implicit none
    type(testsuite_type), allocatable :: suites(:)
    character(len=256) :: suite_name, test_name
@@ -32,7 +33,8 @@ program tester
              new_testsuite("shells", collect_shells), &
              new_testsuite("contact", collect_contact), new_testsuite("slicing", collect_slicing), &
              new_testsuite("audit", collect_audit), new_testsuite("cli", collect_cli), &
-             new_testsuite("api", collect_api), new_testsuite("dense", collect_dense)]
+             new_testsuite("api", collect_api), new_testsuite("dense", collect_dense), &
+             new_testsuite("kindcache", collect_kind_cache)]
    npass = 0
    nfail = 0
    nskip = 0

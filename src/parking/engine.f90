@@ -21,7 +21,8 @@ module anm_parking_engine
    use anm_config_job, only: run_config_type, placement, write_config
    use anm_config_parking, only: parking_strategy
    use anm_shells_thickness, only: thickness_to_mm, thickness_unit
-   use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels
+   use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, &
+      & cache_environment, kind_bytes, body_bytes
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
@@ -96,6 +97,7 @@ contains
       end select
       if (allocated(error)) return
       call system_clock(t1)
+      call cache_line(ks, pk%kinds, progress_unit)
       ! the VRML output draws every kind
       if (cfg%output%vrml) then
          call ks%build(pk%kinds, [(s, s=1, size(pk%kinds))], error)
@@ -158,6 +160,39 @@ contains
       end do
    end subroutine load_sources
 
+   !> Lines about the kinds built (with shells: their number and memory) and the on-disk cache
+   !> (when it is on or could not be used).
+   subroutine cache_line(ks, kinds, unit)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(in) :: kinds(:)
+      integer, intent(in), optional :: unit
+      integer(i8) :: total, shell
+      integer :: k, n
+      if (.not. present(unit)) return
+      if (unit < 0) return
+      if (ks%p%nlayer > 0) then
+         total = 0
+         shell = 0
+         n = count(ks%built)
+         do k = 1, size(kinds)
+            if (.not. ks%built(k)) cycle
+            total = total + kind_bytes(kinds(k))
+            if (allocated(kinds(k)%shell_body)) shell = shell + body_bytes(kinds(k)%shell_body)
+         end do
+         write (unit, '(a,i0,a,i0,a,f0.2,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
+            real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (shell contact body ", &
+            real(shell, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
+      end if
+      if (ks%cache%on) then
+         write (unit, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') "kinds: ", ks%bases_built, " bases and ", ks%shells_built, &
+            " shells built; cache "//ks%cache%dir//": ", ks%cache%hits, " read, ", ks%cache%written, " written, ", &
+            ks%cache%rejected, " rejected, ", ks%cache%misses, " missing, ", ks%cache%write_failed, " not written"
+         if (ks%cache%write_failed > 0) write (unit, '(a)') "warning: kind cache: "//ks%cache%problem
+      else if (allocated(ks%cache%problem)) then
+         if (len(ks%cache%problem) > 0) write (unit, '(a)') "warning: kind cache not used: "//ks%cache%problem
+      end if
+   end subroutine cache_line
+
    !> What building kinds needs of the configuration.
    function kind_params(cfg) result(p)
       type(run_config_type), intent(in) :: cfg
@@ -170,6 +205,7 @@ contains
       p%n_ext = cfg%parking%n_ext
       p%min_width = cfg%sieves%min_width(:cfg%sieves%nsieve)
       p%max_width = cfg%sieves%max_width(:cfg%sieves%nsieve)
+      p%cache_directory = cache_environment()
    end function kind_params
 
    !> What the packing needs of the configuration.

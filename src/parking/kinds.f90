@@ -2,7 +2,9 @@
 !> at the sieve's order, contact body, shell layers) and the set of them for a run, built lazily
 !> (a kind is built when first needed; a kind equal to an earlier one is built once and copied;
 !> the geometry and bare contact body of a (shape, order) are built once and copied to its width
-!> levels, which differ only in their shells).
+!> levels, which differ only in their shells). With exclusion shells a kind keeps only its shell
+!> contact body's patch arrays (`bare_patches`). With p%cache_directory (ANM_CACHE) the bases and
+!> shells are read from and written to an on-disk cache (anm_parking_kind_cache, docs/shells.md).
 !>
 !> The kinds of sieve s are `first(s) .. first(s) + count(s) - 1`: `nlev` blocks (width levels,
 !> shells in mm) of the sieve's shapes.
@@ -11,6 +13,7 @@
 !>     call new_kind_set(ks, kinds, params, shapes, names, first_shape, nshape, order)
 !>     call ks%build(kinds, [(k, k = ks%first(s), ks%first(s) + ks%count(s) - 1)], error)
 module anm_parking_kinds
+   use, intrinsic :: iso_fortran_env, only: int8, int64
    use anm_core_kinds, only: wp
    use anm_core_error, only: error_type, fatal_error
    use anm_core_filesystem, only: string_type
@@ -20,10 +23,13 @@ module anm_parking_kinds
    use anm_shells_build, only: shell_report_type, build_layers
    use anm_config_shells, only: shell_mode
    use anm_shells_thickness, only: thickness_unit, thickness_to_shape_units
+   use anm_parking_kind_cache, only: kind_cache_type, new_kind_cache, byte_writer_type, byte_reader_type, key_start, &
+      & put_body, get_body, put_expansion, get_expansion
    implicit none
    private
 
-   public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels
+   public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, cache_environment, kind_bytes, &
+      & body_bytes
 
    !> Discrete widths per sieve when shell thickness is given in mm.
    integer, parameter :: width_levels = 8
@@ -40,7 +46,9 @@ module anm_parking_kinds
       integer :: level = 0
       !> Geometry at the order used (shape units).
       real(wp) :: width = 0.0_wp, length = 0.0_wp, volume = 0.0_wp
-      !> Bare particle.
+      !> Bare particle. With exclusion shells (mode 'exclude') the packing tests only the shell
+      !> bodies, and this body keeps its shape and certified scalars (r_min, r_max, boxes) but not
+      !> its patch arrays (`bare_patches`): about 4.5 MB less per kind.
       type(contact_body_type) :: body
       !> Particle plus its outermost shell (allocated with shells).
       type(contact_body_type), allocatable :: shell_body
@@ -72,6 +80,8 @@ module anm_parking_kinds
       integer :: n_ext = 40
       !> Width range of each sieve (mm).
       real(wp), allocatable :: min_width(:), max_width(:)
+      !> Folder of the on-disk cache of built kinds ('' or 'off': none; anm_parking_kind_cache).
+      character(len=:), allocatable :: cache_directory
    end type kind_params_type
 
    !> Bookkeeping of the kinds of a run.
@@ -91,6 +101,10 @@ module anm_parking_kinds
       !> The run's shapes and names (the model's).
       type(sh_expansion_type), allocatable :: shapes(:)
       type(string_type), allocatable :: names(:)
+      !> On-disk cache of built bases and shells (off unless p%cache_directory names a folder).
+      type(kind_cache_type) :: cache
+      !> Bases (geometry and bare body) and shells built here (not read from the cache).
+      integer :: bases_built = 0, shells_built = 0
    contains
       !> Build the kinds of a list that are not built yet.
       procedure :: build
@@ -115,6 +129,7 @@ contains
       integer, intent(in) :: first_shape(:), nshape(:), order(:)
       integer :: nsieve, s, n, lev, k, i, j
       ks%p = params
+      if (allocated(params%cache_directory)) call new_kind_cache(ks%cache, params%cache_directory)
       ks%shapes = shapes
       allocate (ks%names(size(names)))
       do i = 1, size(names)
@@ -175,8 +190,7 @@ contains
       integer, intent(in) :: list(:)
       !> Error of the first kind that failed.
       type(error_type), allocatable, intent(out) :: error
-      type(error_type), allocatable :: errs(:)
-      logical, allocatable :: want(:), failed(:)
+      logical, allocatable :: want(:)
       integer, allocatable :: todo(:)
       integer :: i, j, k, sieve, level
       allocate (want(size(kinds)))
@@ -207,20 +221,24 @@ contains
             end do
          end do
          block
-            integer, allocatable :: bases(:)
+            integer, allocatable :: bases(:), fresh(:)
+            logical, allocatable :: hit(:)
             bases = pack(todo, self%base(todo) == todo .and. .not. self%base_built(todo))
             if (size(bases) > 0) then
-               allocate (errs(size(bases)), failed(size(bases)))
-               failed = .false.
-               call build_originals(self, kinds, bases, failed, errs, .true.)
+               ! from the cache where it has them, the others built in parallel and stored
+               allocate (hit(size(bases)))
+               hit = .false.
                do i = 1, size(bases)
-                  if (failed(i)) then
-                     call fatal_error(error, errs(i)%message, errs(i)%stat)
-                     return
-                  end if
+                  if (self%cache%on) call load_base(self, kinds(bases(i)), hit(i))
+               end do
+               fresh = pack(bases, .not. hit)
+               call build_list(self, kinds, fresh, .true., error)
+               if (allocated(error)) return
+               self%bases_built = self%bases_built + size(fresh)
+               do i = 1, size(fresh)
+                  if (self%cache%on) call store_base(self, kinds(fresh(i)))
                end do
                self%base_built(bases) = .true.
-               deallocate (errs, failed)
             end if
          end block
          do i = 1, size(todo)
@@ -230,15 +248,29 @@ contains
                self%base_built(k) = .true.
             end if
          end do
-         allocate (errs(size(todo)), failed(size(todo)))
-         failed = .false.
-         call build_originals(self, kinds, todo, failed, errs, .false.)
-         do i = 1, size(todo)
-            if (failed(i)) then
-               call fatal_error(error, errs(i)%message, errs(i)%stat)
-               return
-            end if
-         end do
+         if (self%p%nlayer > 0) then
+            block
+               integer, allocatable :: fresh(:)
+               logical, allocatable :: hit(:)
+               allocate (hit(size(todo)))
+               hit = .false.
+               do i = 1, size(todo)
+                  if (self%cache%on) call load_shells(self, kinds(todo(i)), hit(i))
+               end do
+               fresh = pack(todo, .not. hit)
+               call build_list(self, kinds, fresh, .false., error)
+               if (allocated(error)) return
+               self%shells_built = self%shells_built + size(fresh)
+               do i = 1, size(fresh)
+                  if (self%cache%on) call store_shells(self, kinds(fresh(i)))
+               end do
+            end block
+         end if
+         if (.not. bare_patches(self%p)) then
+            do i = 1, size(todo)
+               call strip_patches(kinds(todo(i))%body)
+            end do
+         end if
          self%built(todo) = .true.
       end if
       do i = 1, size(list)
@@ -252,6 +284,184 @@ contains
          self%built(k) = .true.
       end do
    end subroutine build
+
+   !> Build kinds(list) in parallel: their geometry and bare bodies (`bases`) or their shells.
+   subroutine build_list(ks, kinds, list, bases, error)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(inout) :: kinds(:)
+      integer, intent(in) :: list(:)
+      logical, intent(in) :: bases
+      type(error_type), allocatable, intent(out) :: error
+      type(error_type), allocatable :: errs(:)
+      logical, allocatable :: failed(:)
+      integer :: i
+      if (size(list) == 0) return
+      allocate (errs(size(list)), failed(size(list)))
+      failed = .false.
+      call build_originals(ks, kinds, list, failed, errs, bases)
+      do i = 1, size(list)
+         if (failed(i)) then
+            call fatal_error(error, errs(i)%message, errs(i)%stat)
+            return
+         end if
+      end do
+   end subroutine build_list
+
+   !> Whether the kinds keep their bare body's patch arrays: needed unless the packing tests only
+   !> the shell bodies (exclusion shells).
+   pure logical function bare_patches(p)
+      type(kind_params_type), intent(in) :: p
+      bare_patches = p%nlayer == 0 .or. p%mode /= shell_mode%exclude
+   end function bare_patches
+
+   !> Drop a contact body's patch arrays (its shape and certified scalars stay).
+   subroutine strip_patches(body)
+      type(contact_body_type), intent(inout) :: body
+      if (allocated(body%dir)) deallocate (body%dir)
+      if (allocated(body%cosa)) deallocate (body%cosa)
+      if (allocated(body%sina)) deallocate (body%sina)
+      if (allocated(body%rlo)) deallocate (body%rlo)
+      if (allocated(body%rhi)) deallocate (body%rhi)
+      if (allocated(body%ball)) deallocate (body%ball)
+      if (allocated(body%brad)) deallocate (body%brad)
+      if (allocated(body%dlo)) deallocate (body%dlo)
+      if (allocated(body%dhi)) deallocate (body%dhi)
+      if (allocated(body%row_ct)) deallocate (body%row_ct)
+      if (allocated(body%row_st)) deallocate (body%row_st)
+      if (allocated(body%row_cosa)) deallocate (body%row_cosa)
+      if (allocated(body%row_sina)) deallocate (body%row_sina)
+      if (allocated(body%col_cp)) deallocate (body%col_cp)
+      if (allocated(body%col_sp)) deallocate (body%col_sp)
+      if (allocated(body%node)) deallocate (body%node)
+   end subroutine strip_patches
+
+   !> Cache key of a kind's base: order, N_ext, whether the patch arrays are kept, coefficients.
+   function base_key(ks, kd) result(key)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type) :: w
+      integer(int8), allocatable :: key(:)
+      call key_start(ks%cache, "base", w)
+      call w%put([kd%order, ks%p%n_ext, merge(1, 0, bare_patches(ks%p))])
+      call put_expansion(w, sh_truncate(ks%shapes(kd%shape), kd%order))
+      key = w%bytes()
+   end function base_key
+
+   !> Cache key of a kind's shells: order, N_ext, whether a shell body is built, thicknesses
+   !> (shape units), coefficients.
+   function shells_key(ks, kd) result(key)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type) :: w
+      integer(int8), allocatable :: key(:)
+      real(wp), allocatable :: t(:)
+      t = shell_thickness(ks%p, kd)
+      call key_start(ks%cache, "shells", w)
+      call w%put([kd%order, ks%p%n_ext, merge(1, 0, ks%p%mode /= shell_mode%overlap), size(t)])
+      call w%put(t)
+      call put_expansion(w, sh_truncate(ks%shapes(kd%shape), kd%order))
+      key = w%bytes()
+   end function shells_key
+
+   !> A kind's geometry and bare body from the cache (hit) or nothing.
+   subroutine load_base(ks, kd, hit)
+      type(kind_set_type), intent(inout) :: ks
+      type(particle_kind_type), intent(inout) :: kd
+      logical, intent(out) :: hit
+      type(byte_reader_type) :: r
+      type(contact_body_type) :: empty
+      real(wp) :: g(3)
+      call ks%cache%load(base_key(ks, kd), r, hit)
+      if (.not. hit) return
+      call r%get(g)
+      call get_body(r, kd%body)
+      if (.not. r%done()) then
+         call reject(ks, hit)
+         kd%body = empty
+         return
+      end if
+      kd%width = g(1)
+      kd%length = g(2)
+      kd%volume = g(3)
+      kd%body%shape = sh_truncate(ks%shapes(kd%shape), kd%order)
+      kd%r_out = kd%body%r_max
+      kd%r_in_query = kd%body%r_min
+      kd%r_in_parked = kd%body%r_min
+   end subroutine load_base
+
+   !> Store a kind's geometry and bare body.
+   subroutine store_base(ks, kd)
+      type(kind_set_type), intent(inout) :: ks
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type) :: w
+      call w%put([kd%width, kd%length, kd%volume])
+      call put_body(w, kd%body, bare_patches(ks%p))
+      call ks%cache%store(base_key(ks, kd), w%bytes())
+   end subroutine store_base
+
+   !> A kind's shells from the cache (hit) or nothing; its base is in place.
+   subroutine load_shells(ks, kd, hit)
+      type(kind_set_type), intent(inout) :: ks
+      type(particle_kind_type), intent(inout) :: kd
+      logical, intent(out) :: hit
+      type(byte_reader_type) :: r
+      type(sh_expansion_type), allocatable :: layers(:)
+      real(wp), allocatable :: vol(:)
+      integer :: n, k, has_body
+      call ks%cache%load(shells_key(ks, kd), r, hit)
+      if (.not. hit) return
+      call r%get(n)
+      if (n /= ks%p%nlayer) then
+         call reject(ks, hit)
+         return
+      end if
+      allocate (layers(n), vol(n))
+      do k = 1, n
+         call get_expansion(r, layers(k))
+      end do
+      call r%get(vol)
+      call r%get(has_body)
+      if (has_body == 1) then
+         allocate (kd%shell_body)
+         call get_body(r, kd%shell_body)
+      end if
+      if (.not. r%done() .or. has_body /= merge(1, 0, ks%p%mode /= shell_mode%overlap)) then
+         call reject(ks, hit)
+         if (allocated(kd%shell_body)) deallocate (kd%shell_body)
+         return
+      end if
+      call move_alloc(layers, kd%layers)
+      call move_alloc(vol, kd%layer_volume)
+      if (allocated(kd%shell_body)) then
+         kd%shell_body%shape = sh_truncate(kd%layers(n), kd%layers(n)%nmax)
+         call shell_radii(ks%p, kd)
+      end if
+   end subroutine load_shells
+
+   !> Store a kind's shells.
+   subroutine store_shells(ks, kd)
+      type(kind_set_type), intent(inout) :: ks
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type) :: w
+      integer :: k
+      call w%put(size(kd%layers))
+      do k = 1, size(kd%layers)
+         call put_expansion(w, kd%layers(k))
+      end do
+      call w%put(kd%layer_volume)
+      call w%put(merge(1, 0, allocated(kd%shell_body)))
+      if (allocated(kd%shell_body)) call put_body(w, kd%shell_body, .true.)
+      call ks%cache%store(shells_key(ks, kd), w%bytes())
+   end subroutine store_shells
+
+   !> A cache entry that held the right key but a malformed payload: counted as rejected.
+   subroutine reject(ks, hit)
+      type(kind_set_type), intent(inout) :: ks
+      logical, intent(out) :: hit
+      hit = .false.
+      ks%cache%hits = ks%cache%hits - 1
+      ks%cache%rejected = ks%cache%rejected + 1
+   end subroutine reject
 
    !> A kind's geometry and bare body from its base (another width level of its shape and order).
    subroutine copy_base(from, kd)
@@ -324,6 +534,20 @@ contains
       kd%r_in_parked = kd%body%r_min
    end subroutine prepare_base
 
+   !> Thicknesses of a kind's layers in shape units (with shells in mm at its width level).
+   function shell_thickness(p, kd) result(t)
+      type(kind_params_type), intent(in) :: p
+      type(particle_kind_type), intent(in) :: kd
+      real(wp), allocatable :: t(:)
+      real(wp) :: w, sc
+      sc = 1.0_wp
+      if (p%unit == thickness_unit%mm) then
+         w = level_width(p, kd)
+         sc = w / kd%width
+      end if
+      t = thickness_to_shape_units(p%thickness, p%unit, kd%length, sc)
+   end function shell_thickness
+
    !> Shells of one kind whose geometry and bare body are in place.
    subroutine prepare_shells(p, shape, name, kd, error)
       type(kind_params_type), intent(in) :: p
@@ -334,16 +558,10 @@ contains
       type(sh_expansion_type) :: s
       type(shell_report_type), allocatable :: reports(:)
       real(wp), allocatable :: t(:)
-      real(wp) :: w, sc
       integer :: k
       if (p%nlayer == 0) return
       s = sh_truncate(shape, kd%order)
-      sc = 1.0_wp
-      if (p%unit == thickness_unit%mm) then
-         w = level_width(p, kd)
-         sc = w / kd%width
-      end if
-      t = thickness_to_shape_units(p%thickness, p%unit, kd%length, sc)
+      t = shell_thickness(p, kd)
       call build_layers(s, t, kd%layers, reports, error, label=name)
       if (allocated(error)) then
          error%message = p%file//": &shells: "//error%message
@@ -358,8 +576,63 @@ contains
       allocate (kd%shell_body)
       call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=p%n_ext)
       if (allocated(error)) return
+      call shell_radii(p, kd)
+   end subroutine prepare_shells
+
+   !> The overlap radii of a kind with a shell body.
+   subroutine shell_radii(p, kd)
+      type(kind_params_type), intent(in) :: p
+      type(particle_kind_type), intent(inout) :: kd
       kd%r_out = max(kd%r_out, kd%shell_body%r_max)
       kd%r_in_query = kd%shell_body%r_min
       if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
-   end subroutine prepare_shells
+   end subroutine shell_radii
+
+   !> Memory held by a kind (bytes): its bodies, layers and the scalars.
+   pure integer(int64) function kind_bytes(kd) result(n)
+      !> Kind.
+      type(particle_kind_type), intent(in) :: kd
+      integer :: k
+      n = storage_size(kd) / 8 + body_bytes(kd%body)
+      if (allocated(kd%shell_body)) n = n + body_bytes(kd%shell_body)
+      if (allocated(kd%layers)) then
+         do k = 1, size(kd%layers)
+            n = n + expansion_bytes(kd%layers(k))
+         end do
+         n = n + 8 * size(kd%layer_volume)
+      end if
+   end function kind_bytes
+
+   !> Memory held by a contact body (bytes): its arrays and expansion.
+   pure integer(int64) function body_bytes(b) result(n)
+      !> Body.
+      type(contact_body_type), intent(in) :: b
+      n = storage_size(b) / 8 + expansion_bytes(b%shape) - storage_size(b%shape) / 8
+      if (allocated(b%node)) n = n + 8_int64 * (size(b%dir) + size(b%cosa) + size(b%sina) + size(b%rlo) + size(b%rhi) &
+                                               + size(b%ball) + size(b%brad) + size(b%row_ct) + size(b%row_st) &
+                                               + size(b%row_cosa) + size(b%row_sina) + size(b%col_cp) + size(b%col_sp) &
+                                               + size(b%node)) + 4_int64 * (size(b%dlo) + size(b%dhi))
+   end function body_bytes
+
+   !> Memory held by an expansion (bytes): coefficients and Legendre table.
+   pure integer(int64) function expansion_bytes(e) result(n)
+      type(sh_expansion_type), intent(in) :: e
+      n = storage_size(e) / 8
+      if (allocated(e%a)) n = n + 8_int64 * (size(e%a) + size(e%b))
+      if (allocated(e%table%ca)) n = n + 8_int64 * (size(e%table%ca) + size(e%table%cb) + size(e%table%sect)) &
+                                     + 4_int64 * size(e%table%idx)
+   end function expansion_bytes
+
+   !> The on-disk cache folder from the environment: ANM_CACHE ('' when unset; 'off' disables).
+   function cache_environment() result(dir)
+      character(len=:), allocatable :: dir
+      integer :: n, stat
+      call get_environment_variable("ANM_CACHE", length=n, status=stat)
+      if (stat /= 0 .or. n == 0) then
+         dir = ""
+         return
+      end if
+      allocate (character(len=n) :: dir)
+      call get_environment_variable("ANM_CACHE", dir)
+   end function cache_environment
 end module anm_parking_kinds

@@ -225,8 +225,9 @@ contains
    end subroutine settle_batch
 
    !> Lazy kinds: build the kinds of the next batch and of the particles the sieve will probably
-   !> still need (twice the missing volume over the mean particle volume: a sphere of the mean
-   !> width until particles are parked), together so that they build in parallel.
+   !> still need (the missing volume over the mean particle volume: a sphere of the mean width
+   !> until particles are parked), together so that they build in parallel. (Twice that volume
+   !> built twice the kinds needed: with shells in mm 202 kinds of 4.5 MB for 101 particles.)
    subroutine build_ahead(pk, ks, ap, rp, st, batch, error)
       type(packing_type), intent(inout) :: pk
       type(kind_set_type), intent(inout) :: ks
@@ -242,7 +243,7 @@ contains
       else
          vmean = pi / 6.0_wp * (0.5_wp * (ap%min_width + ap%max_width))**3
       end if
-      horizon = st%nstream + max(batch, rp%nthreads + int(min(4096.0_wp, 2.0_wp * max(0.0_wp, st%target - st%res%vol) &
+      horizon = st%nstream + max(batch, rp%nthreads + int(min(4096.0_wp, max(0.0_wp, st%target - st%res%vol) &
                                                                 / vmean)))
       if (horizon <= st%predicted) return
       call ks%build(pk%kinds, [(first_kind_of(ap, j), j=st%predicted + 1, horizon)], error)
