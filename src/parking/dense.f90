@@ -144,7 +144,7 @@ contains
             call round_line(rp, ms, s, round, res, target)
          end do
          result(s) = res
-         carry = merge(target - res%vol, 0.0_wp, res%reached)
+         carry = merge(target - res%vol, 0.0_wp, res%reached .and. rp%carry)
       end do
    end subroutine park_dense
 
