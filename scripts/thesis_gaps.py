@@ -235,9 +235,12 @@ def probe(res: dict, sieve: int, n: int, seed: int, out: Path) -> dict | None:
     ctx["rmax"] = rmax
     lo_w, hi_w = float(m.sieves["min_width"][sieve]), float(m.sieves["max_width"][sieve])
     free = near = screened = 0
+    tries = np.zeros(len(allpairs), int)
+    frees = np.zeros(len(allpairs), int)
     t0 = time.time()
     for _ in range(n):
         f = index[cand_pairs[rng.integers(len(cand_pairs))]]
+        tries[f] += 1
         sc = rng.uniform(lo_w, hi_w) / geom[f, width_col]
         q = rng.normal(size=4)
         R = quat(q / np.linalg.norm(q))
@@ -249,9 +252,14 @@ def probe(res: dict, sieve: int, n: int, seed: int, out: Path) -> dict | None:
         if not pose_free(ctx, fine, rf, f, c, R, sc):
             continue
         free += 1
+        frees[f] += 1
         if not pose_free(ctx, fine, rf, f, c, R, 1.002 * sc):
             near += 1
-    return {"n": n, "screened": screened, "free": free, "near": near, "seconds": time.time() - t0, "sieve": sieve}
+    used = tries > 0
+    frac = frees[used] / tries[used]
+    return {"n": n, "screened": screened, "free": free, "near": near, "seconds": time.time() - t0, "sieve": sieve,
+            "shapes": int(used.sum()), "shapes_none": int((frees[used] == 0).sum()),
+            "shape_min": float(frac.min()), "shape_max": float(frac.max()), "tries_min": int(tries[used].min())}
 
 
 def fibonacci(n: int) -> np.ndarray:
@@ -488,12 +496,16 @@ def page(runs: dict, wv: dict, probes: list[dict], nbox: dict, commit: str, comm
       "by point location, and the surface points of every parked neighbour against the pose).")
     A("")
     if probes:
-        A("| packing | particle probed | random attempts | free by the dense test | of them within ~0.1 % L of touching | expected free attempts per 2000 (1500) | time (s) |")
-        A("|---|---|---|---|---|---|---|")
+        A("| packing | particle probed | random attempts | free by the dense test | of them within ~0.1 % L "
+          "of touching | expected free attempts per 2000 (1500) | shapes with no free attempt | free fraction "
+          "per shape, min-max | time (s) |")
+        A("|---|---|---|---|---|---|---|---|---|")
         for p in probes:
             locs = 2000 if p["run"].startswith("t21") else 1500
-            A(f"| {p['run']} (final) | sieve {p['sieve'] + 1} | {p['n']} | {p['free']} ({fmt(100 * p['free'] / p['n'], 2)} %) | "
-              f"{p['near']} | {fmt(locs * p['free'] / p['n'], 1)} | {p['seconds']:.0f} |")
+            A(f"| {p['run']} (final) | sieve {p['sieve'] + 1} | {p['n']} | {p['free']} "
+              f"({fmt(100 * p['free'] / p['n'], 2)} %) | {p['near']} | {fmt(locs * p['free'] / p['n'], 1)} | "
+              f"{p['shapes_none']} of {p['shapes']} (>= {p['tries_min']} attempts each) | "
+              f"{fmt(100 * p['shape_min'], 1)}-{fmt(100 * p['shape_max'], 1)} % | {p['seconds']:.0f} |")
         A("")
         near_total = sum(p["near"] for p in probes)
         free_total = sum(p["free"] for p in probes)
@@ -501,8 +513,9 @@ def page(runs: dict, wv: dict, probes: list[dict], nbox: dict, commit: str, comm
         expect_text = ("Yet an average particle would find at least two free locations in its 2000 (1500) attempts "
                        "even on the final packing: the first failure is a particle whose own shape, width and "
                        "orientation (one of each per particle, `max_shapes = max_sizes = max_orientations = 1`) "
-                       "leave it far less room than the average, and the failure rule turns that one particle "
-                       "into a short or empty sieve. " if many else "")
+                       "leave it far less room than the average (the free fraction differs much between shapes, "
+                       "table), and the failure rule turns that one particle into a short or empty sieve. "
+                       if many else "")
         A("Attempts are drawn as the engine draws them (a shape of the model, a width uniform in the sieve, a "
           "uniform rotation, a centre uniform in the box at least the inscribed radius from a wall) on the "
           "final packing of the first-failure run, i.e. after the probed sieve had ended at its first failed "
@@ -560,7 +573,7 @@ def main() -> int:
     ap.add_argument("--anm", default=str(ROOT / "build/install/bin/anm"))
     ap.add_argument("--out", default="out/gaps")
     ap.add_argument("--page", default="docs/thesis-gaps.md")
-    ap.add_argument("--probe", type=int, default=300, help="random poses per probed packing (0: no probe)")
+    ap.add_argument("--probe", type=int, default=1500, help="random poses per probed packing (0: no probe)")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     t0 = time.time()
@@ -579,7 +592,7 @@ def main() -> int:
                 break
             p["run"] = key
             probes.append(p)
-    command = "python3 scripts/thesis_gaps.py" + ("" if args.probe == 300 else f" --probe {args.probe}")
+    command = "python3 scripts/thesis_gaps.py" + ("" if args.probe == 1500 else f" --probe {args.probe}")
     nbox = nbox_study(args.anm, out)
     text = page(runs, wv, probes, nbox, commit, command, time.time() - t0)
     (ROOT / args.page).write_text(text)
