@@ -449,6 +449,9 @@ def page(runs: dict, wv: dict, probes: list[dict], nbox: dict, commit: str, comm
     A(f"| thesis M_sand sand, implied (0.08 x 8000 / 202736 / E[W^3]) | 202,736 grains | {fmt(wv['thesis_r_sand'], 3)} |")
     A(f"| a sphere of diameter W | - | {fmt(np.pi / 6, 3)} |")
     A("")
+    A("(NIST's fine table prints volumes to one decimal, so its smallest grains read 0.0 and its extremes mean "
+      "little; the medians compare.)")
+    A("")
     vbox = 66.0 ** 3
     wr = [(10, 11), (9, 10), (8, 9), (7, 8)]
     th = [THESIS_T21["shares"][k] * 0.25 * vbox / THESIS_T21["counts"][k] / mean_cube(*wr[k]) for k in range(4)]
@@ -559,8 +562,11 @@ def page(runs: dict, wv: dict, probes: list[dict], nbox: dict, commit: str, comm
       f"{'the same model' if runs['t21_f1_ours_plain']['n'] == a['n'] and runs['t21_f1_ours_plain']['pd'] == a['pd'] else 'another model'}); "
       f"the rest, {fmt(THESIS_T21['pd'] - runs['t21_f100_thesis_plain']['pd'])}, is mostly the thesis' total being "
       f"above the sum of its own columns ({fmt(THESIS_T21['pd'] - sum(THESIS_T21['shares']) * 0.25)}).")
-    A("- Table 2.3: one early failure decides a first-failure run; the thesis' row lies between our first-failure "
-      "runs and the runs that go on past failures.")
+    A(f"- Table 2.3 (gap {fmt(THESIS_T23['pd'] - runs['t23_f1_ours']['pd'])}): one early failure decides a "
+      f"first-failure run (ours {fmt(runs['t23_f1_ours']['pd'])}, with the thesis' sieve-volume rules "
+      f"{fmt(runs['t23_f1_thesis']['pd'])}); the thesis' {THESIS_T23['pd']} lies between these and the runs "
+      f"that go on past failures ({fmt(runs['t23_f100_ours']['pd'])}, {fmt(runs['t23_f100_thesis']['pd'])}); "
+      "the contact test changes neither.")
     A("- M_sand: the width-to-volume relation: the thesis' coarse particles held about "
       f"{fmt(wv['thesis_v_coarse'] / wv['ev_coarse_ours'], 2)} times the volume of ours (and of NIST's) at the "
       "same width, so 2 of them filled 0.13 of the box where 5 of ours fill 0.20.")
