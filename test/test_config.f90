@@ -6,6 +6,7 @@ module test_config
    use anm_core_error, only: error_type
    use anm_config_job, only: run_config_type, read_config, write_config, placement, contact_method, shell_mode, &
       & thickness_unit, vrml_layout
+   use anm_config_parking, only: last_particle, sieve_carry
    use anm_shells_thickness, only: thickness_to_mm, thickness_to_shape_units
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
@@ -37,7 +38,9 @@ contains
               new_unittest("NaN and Inf are refused", test_not_finite), &
               new_unittest("a binary file is not a namelist", test_binary), &
               new_unittest("text outside groups and unclosed groups are refused", test_structure), &
-              new_unittest("thickness units convert in one place", test_thickness_units)]
+              new_unittest("thickness units convert in one place", test_thickness_units), &
+              new_unittest("the thesis' sieve rules: resolved, dumped only when chosen, bad values named", &
+                           test_sieve_rules)]
    end subroutine collect_config
 
    subroutine write_text(name, text)
@@ -285,4 +288,36 @@ contains
       call check(error, thickness_to_shape_units(0.02_wp, thickness_unit%fraction_of_length, 3.0_wp, 0.5_wp), 0.06_wp, &
                  "fraction to shape", thr=tol)
    end subroutine test_thickness_units
+   subroutine test_sieve_rules(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(run_config_type) :: a, b
+      ! defaults: today's rules, and the resolved text does not mention them (unchanged models)
+      call write_text("rules-default.nml", base_nml())
+      call read_config(tmpdir//"/rules-default.nml", a, error)
+      if (allocated(error)) return
+      call check(error, a%parking%last_particle == last_particle%closer .and. a%parking%sieve_carry == sieve_carry%rounding, &
+                 "defaults are 'closer' and 'rounding'")
+      if (allocated(error)) return
+      call check(error, index(write_config(a), "last_particle") == 0 .and. index(write_config(a), "sieve_carry") == 0, &
+                 "the default rules must not appear in the resolved text")
+      if (allocated(error)) return
+      ! the thesis' rules: resolved (any case) and written back
+      call write_text("rules.nml", base_nml()//"&parking last_particle = 'Overshoot', sieve_carry = 'NONE' /")
+      call read_config(tmpdir//"/rules.nml", a, error)
+      if (allocated(error)) return
+      call check(error, a%parking%last_particle == last_particle%overshoot .and. a%parking%sieve_carry == sieve_carry%none, &
+                 "'overshoot' and 'none' resolved")
+      if (allocated(error)) return
+      call write_text("rules-out.nml", write_config(a))
+      call read_config(tmpdir//"/rules-out.nml", b, error)
+      if (allocated(error)) return
+      call check(error, b%parking%last_particle == last_particle%overshoot .and. b%parking%sieve_carry == sieve_carry%none, &
+                 "the rules did not survive the dump")
+      if (allocated(error)) return
+      call expect_error(error, "rules-bad1.nml", base_nml()//"&parking"//nl//"  last_particle = 'over' /", &
+                        "last_particle", "rules-bad1.nml:4:")
+      if (allocated(error)) return
+      call expect_error(error, "rules-bad2.nml", base_nml()//"&parking"//nl//"  max_locations = 5"//nl &
+                        //"  sieve_carry = 'all' /", "sieve_carry", "rules-bad2.nml:5:")
+   end subroutine test_sieve_rules
 end module test_config

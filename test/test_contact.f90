@@ -16,6 +16,7 @@ module test_contact
       & patch_cols, patch_index, patch_geometry, patch_bounds, slope_bound, nd_c, nd_e, nd_h, nd_r, nd_rc, nd_dir
    use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_depth, &
       & body_crosses_walls, sector_range, boxes_disjoint
+   use anm_contact_studies, only: thesis_overlap_depth
    use anm_testing, only: unittest_type, new_unittest, check, shapes_dir
    implicit none
    private
@@ -46,7 +47,9 @@ contains
               new_unittest("ellipsoids agree with Perram-Wertheim", test_ellipsoids), &
               new_unittest("real shapes against dense brute force", test_real_shapes), &
               new_unittest("walls against exact ellipsoid extents", test_walls), &
-              new_unittest("Newton-Raphson baseline on spheres and ellipsoids", test_newton_raphson)]
+              new_unittest("Newton-Raphson baseline on spheres and ellipsoids", test_newton_raphson), &
+              new_unittest("thesis' N_box reading: exact D_overlap of spheres, ellipsoids near the engine's", &
+                           test_thesis_nbox)]
    end subroutine collect_contact
 
    !> `sector_range` against sampled sector points: 20,000 random sectors (half-angles up to 1.2
@@ -836,4 +839,62 @@ contains
       if (allocated(error)) return
       call check(error, fnn <= novl / 5, "Newton-Raphson misses more than 20% of clear overlaps")
    end subroutine test_newton_raphson
+   !> The thesis' reading of N_box (anm_contact_studies): N_box points over the angular range of the
+   !> surface inside the EOB. Two unit spheres 1.998 apart overlap by exactly 0.002 along the line of
+   !> centres: along z (a node of the N_ext scan, so the EOB holds the tip) the scan finds 0.002;
+   !> along x the N_ext extent box clips the tip and the scan finds at most the analytic depth of the
+   !> clipped cap (the thesis' method misses overlaps outside its extent boxes). Apart, the depth is 0. Two ellipsoids at 0.998
+   !> of their contact distance: the thesis' reading at N_box = 301 finds nearly the depth the
+   !> engine's reading finds at 1024 (both sample the same surfaces inside the same EOB).
+   subroutine test_thesis_nbox(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(contact_body_type) :: sph, ell
+      type(rng_type) :: rng
+      real(wp) :: eye(3, 3), ra(3, 3), rb(3, 3), d, lo, hi, mid, d_thesis, d_engine, zero(3), ex(3), c, dmax
+      integer :: i, it
+      call new_contact_body(sph, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      eye = 0.0_wp
+      do i = 1, 3
+         eye(i, i) = 1.0_wp
+      end do
+      zero = 0.0_wp
+      ex = [1.0_wp, 0.0_wp, 0.0_wp]
+      ! along x the N_ext = 40 extent box clips the tip (no theta node at pi/2: x <= c = cos(pi/78)),
+      ! so the deepest point inside the EOB has x = c: D <= 1 - sqrt((1.998 - c)^2 + 1 - c^2) < 0.002
+      c = cos(pi / 78.0_wp)
+      dmax = 1.0_wp - sqrt((1.998_wp - c)**2 + 1.0_wp - c**2)
+      d = thesis_overlap_depth(sph, zero, eye, sph, 1.998_wp * ex, eye, 41)
+      print '(a,2es12.5)', "        spheres along x, N_box 41: D_overlap, bound from the clipped EOB: ", d, dmax
+      call check(error, d <= dmax + 1.0e-12_wp .and. d >= 0.5_wp * dmax, "spheres along x: D_overlap " &
+                 //to_string(d)//" not within [0.5, 1] x "//to_string(dmax))
+      if (allocated(error)) return
+      d = thesis_overlap_depth(sph, zero, eye, sph, [0.0_wp, 0.0_wp, 1.998_wp], eye, 40)
+      call check(error, abs(d - 0.002_wp) < 1.0e-9_wp, "spheres along z: D_overlap "//to_string(d)//" /= 0.002")
+      if (allocated(error)) return
+      d = thesis_overlap_depth(sph, zero, eye, sph, 2.001_wp * ex, eye, 41)
+      call check(error, d == 0.0_wp, "spheres apart: D_overlap "//to_string(d)//" /= 0")
+      if (allocated(error)) return
+      call new_contact_body(ell, ellipsoid_shape(3.0_wp, 2.0_wp, 1.0_wp, 12), error)
+      if (allocated(error)) return
+      call new_rng(rng, 11_i8, 1_i8)
+      ra = random_rotation(rng)
+      rb = random_rotation(rng)
+      lo = 2.0_wp * ell%r_min
+      hi = 2.0_wp * ell%r_max
+      do it = 1, 40
+         mid = 0.5_wp * (lo + hi)
+         if (overlap_depth(ell, zero, ra, 1.0_wp, ell, mid * ex, rb, 1.0_wp, 1024) > 0.0_wp) then
+            lo = mid
+         else
+            hi = mid
+         end if
+      end do
+      d_engine = overlap_depth(ell, zero, ra, 1.0_wp, ell, 0.99_wp * lo * ex, rb, 1.0_wp, 1024)
+      d_thesis = thesis_overlap_depth(ell, zero, ra, ell, 0.99_wp * lo * ex, rb, 301)
+      print '(a,2es12.5)', "        ellipsoids at 0.99 contact: D_overlap thesis (301), engine (1024): ", d_thesis, &
+         d_engine
+      call check(error, d_engine > 0.0_wp .and. abs(d_thesis - d_engine) <= 0.05_wp * d_engine, &
+                 "ellipsoids: the thesis' reading differs from the engine's by more than 5 %")
+   end subroutine test_thesis_nbox
 end module test_contact

@@ -44,7 +44,8 @@ contains
               new_unittest("void placement: max_batch=1 and 2 threads with large batches give the same model", &
                            test_void_batches), &
               new_unittest("max_failures: the thesis' model is a prefix, more particles follow", test_max_failures), &
-              new_unittest("rounding of a sieve moves to the next: total within half a grain", test_carry)]
+              new_unittest("rounding of a sieve moves to the next: total within half a grain", test_carry), &
+              new_unittest("the thesis' rules: overshoot ends each sieve at or above its own target", test_thesis_rules)]
    end subroutine collect_parking
 
    subroutine run_case(error, periodic, box, rmin, rmax, n, nq)
@@ -470,4 +471,45 @@ contains
       call check(error, abs(m%achieved_fraction(2) - (0.102_wp - 12 * v1)) <= 0.5_wp * v2 + 1.0e-12_wp, &
                  "fine sieve did not take the coarse sieve's remainder")
    end subroutine test_carry
+   !> The thesis' sieve-volume rules (docs/thesis-gaps.md) on the setup of test_carry, where the
+   !> counts follow from the target alone: coarse spheres of 0.0041888 of the box, target 0.052 =
+   !> 12.41 grains; fine 0.00052360, target 0.05 = 95.49 grains.
+   subroutine test_thesis_rules(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: m
+      real(wp) :: v1, v2
+      character(len=*), parameter :: base = "&box length = 20, 20, 20 /"//new_line("a")// &
+         "&sieves nsieve = 2, min_width = 4, 2, max_width = 4, 2, fraction = 0.052, 0.05, source = 2*'sphere', " &
+         //"order = 2*0 /"//new_line("a")//"&parking max_locations = 20000"
+      v1 = 4.0_wp / 3.0_wp * acos(-1.0_wp) * 2.0_wp**3 / 8000.0_wp
+      v2 = v1 / 8.0_wp
+      ! overshoot, no carry (the thesis): each sieve ends at the first grain that reaches its own
+      ! target: ceiling(12.41) = 13 and ceiling(95.49) = 96
+      call run_nml("thesis-rules.nml", base//", last_particle = 'overshoot', sieve_carry = 'none' /", m, error)
+      if (allocated(error)) return
+      print '(a,2(i0,a),2f9.5)', "        overshoot, no carry: ", m%count(1), " + ", m%count(2), " spheres, ", &
+         m%achieved_fraction
+      call check(error, all(m%achieved_fraction >= m%target_fraction), "a sieve ended below its own target")
+      if (allocated(error)) return
+      call check(error, all(m%achieved_fraction - m%target_fraction < [v1, v2]), "a sieve went a whole grain past its target")
+      if (allocated(error)) return
+      call check(error, m%count(1) == 13 .and. m%count(2) == 96, "expected 13 + 96 grains")
+      if (allocated(error)) return
+      ! overshoot with the rounding carry: the coarse excess (13 v1 - 0.052) comes off the fine target
+      call run_nml("overshoot-carry.nml", base//", last_particle = 'overshoot' /", m, error)
+      if (allocated(error)) return
+      print '(a,2(i0,a),2f9.5)', "        overshoot, carry: ", m%count(1), " + ", m%count(2), " spheres, ", &
+         m%achieved_fraction
+      call check(error, m%count(1) == 13 .and. m%count(2) == ceiling((0.102_wp - 13 * v1) / v2), &
+                 "the fine sieve did not aim at 0.102 minus the coarse volume")
+      if (allocated(error)) return
+      call check(error, sum(m%achieved_fraction) >= 0.102_wp .and. sum(m%achieved_fraction) < 0.102_wp + v2, &
+                 "total not within one fine grain above 0.102")
+      if (allocated(error)) return
+      ! the closer rule without the carry: 12 coarse grains, the fine sieve within half a grain of 0.05
+      call run_nml("closer-nocarry.nml", base//", sieve_carry = 'none' /", m, error)
+      if (allocated(error)) return
+      call check(error, m%count(1) == 12 .and. abs(m%achieved_fraction(2) - 0.05_wp) <= 0.5_wp * v2 + 1.0e-12_wp, &
+                 "without the carry the fine sieve must aim at its own 0.05")
+   end subroutine test_thesis_rules
 end module test_parking

@@ -274,13 +274,16 @@ def _rdf_spec(args: argparse.Namespace):
             raise AnmPostError(f"--sieves: expected comma-separated 0-based sieve numbers, got {args.sieves!r}") \
                 from None
     try:
-        return RdfSpec(particle=args.particle, n_shells=args.bins, t_min=args.t_min, t_max=args.t_max,
+        return RdfSpec(particle=args.particle, width=args.width, length=args.length, n_shells=args.bins,
+                       t_min=args.t_min, t_max=args.t_max,
                        unit=args.unit, axis=args.axis, pixel=args.pixel, density=getattr(args, "density", 1.0),
                        small_sieves=sieves, small_below=args.below, phi_b=args.phi_b)
     except AnmPostError as exc:
         text = str(exc)
         option = next((o for key, o in (("number of shells", "--bins"), ("shell distances", "--t-min/--t-max"),
-                                        ("pixel", "--pixel"), ("density", "--density"), ("bulk", "--phi-b"))
+                                        ("pixel", "--pixel"), ("density", "--density"), ("bulk", "--phi-b"),
+                                        ("id, width and length", "--particle/--width/--length"),
+                                        ("particle width", "--width"), ("particle length", "--length"))
                        if key in text), "options")
         raise AnmPostError(f"{option}: {text}") from None
 
@@ -560,6 +563,10 @@ def _add_export_voxels(sub) -> None:
 def _rdf_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model file written by `anm run` (.h5)")
     p.add_argument("--particle", type=int, metavar="ID", help="0-based id of the RDF particle (default: the longest)")
+    p.add_argument("--width", type=float, metavar="MM",
+                   help="RDF particle: the one of nearest width (mm) outside the small sieves (the thesis: 9.997)")
+    p.add_argument("--length", type=float, metavar="MM",
+                   help="RDF particle: the one of nearest length (mm) outside the small sieves")
     p.add_argument("--bins", type=int, default=10, metavar="K", help="number of distance shells K of g(t) (default 10)")
     p.add_argument("--shells", nargs="?", const="model", help=argparse.SUPPRESS)
     p.add_argument("--t-min", type=float, default=0.005, metavar="T", help="innermost shell distance (default 0.005)")

@@ -46,7 +46,9 @@ from .slicing import Plane, ShellSpec, Slicer, stack_positions, _AXES
 
 @dataclass(frozen=True)
 class RdfSpec:
-    """What to measure. particle: 0-based id of the RDF particle (None: the longest particle);
+    """What to measure. particle: 0-based id of the RDF particle; width or length (mm): the particle
+    of the nearest width or length instead (the thesis chose its RDF particle by size, section 3.4);
+    none of the three: the longest particle;
     n_shells, t_min, t_max: K shells with outer distances linear from t_min to t_max, in `unit`
     ("fraction" of the RDF particle's length, or "mm"); axis, pixel (R_s, mm), density (rho_s):
     the slices; small_sieves: 0-based sieves counted as small particles, or small_below: every
@@ -54,6 +56,8 @@ class RdfSpec:
     fraction to divide by (None: Eq 3.6 from the particle volumes)."""
 
     particle: int | None = None
+    width: float | None = None
+    length: float | None = None
     n_shells: int = 10
     t_min: float = 0.005
     t_max: float = 0.05
@@ -66,6 +70,12 @@ class RdfSpec:
     phi_b: float | None = None
 
     def __post_init__(self) -> None:
+        if sum(x is not None for x in (self.particle, self.width, self.length)) > 1:
+            raise AnmPostError("the RDF particle is chosen by one of id, width and length, got more than one")
+        for name in ("width", "length"):
+            value = getattr(self, name)
+            if value is not None and not (value > 0 and np.isfinite(value)):
+                raise AnmPostError(f"RDF particle {name} must be positive, got {value}")
         if self.n_shells < 1:
             raise AnmPostError(f"number of shells must be >= 1, got {self.n_shells}")
         if not (0 < self.t_min <= self.t_max) or (self.n_shells > 1 and self.t_min == self.t_max):
@@ -247,12 +257,37 @@ class RdfSetup:
     width: float
 
 
+def particle_widths(model: Model, slicer: Slicer | None = None) -> np.ndarray:
+    """Width W (mm) of every particle (the thesis' sieve size: the longest extent perpendicular to
+    the length)."""
+    slicer = slicer or Slicer(model)
+    return slicer.geometry()[slicer.particle_form_ids(), kernels.GEOMETRY_COLUMNS.index("width")] * model.scale
+
+
+def choose_particle(model: Model, spec: RdfSpec, slicer: Slicer | None = None) -> int:
+    """The RDF particle of `spec`: its id, the particle (outside the small sieves) whose width or
+    length is nearest the one asked for (ties: the lowest id), or the longest particle."""
+    slicer = slicer or Slicer(model)
+    if spec.particle is not None:
+        return int(spec.particle)
+    lengths = particle_lengths(model, slicer)
+    if spec.width is None and spec.length is None:
+        return int(np.argmax(lengths))
+    size = particle_widths(model, slicer) if spec.width is not None else lengths
+    wanted = spec.width if spec.width is not None else spec.length
+    small = small_sieves(model, spec)
+    cand = np.flatnonzero(~np.isin(model.sieve, small))
+    if cand.size == 0:
+        raise AnmPostError("no particle outside the small-particle sieves to choose the RDF particle from")
+    return int(cand[np.argmin(np.abs(size[cand] - wanted))])
+
+
 def prepare(model: Model, spec: RdfSpec) -> RdfSetup:
     """The RDF particle, its shells, phi_B and the two slicers (computed once; pass the result as
     `setup=` to rdf, convergence and volume_fractions of the same model and spec)."""
     full = Slicer(model)
     lengths = particle_lengths(model, full)
-    pid = int(np.argmax(lengths)) if spec.particle is None else int(spec.particle)
+    pid = choose_particle(model, spec, full)
     if not (0 <= pid < model.n_particles):
         raise AnmPostError(f"RDF particle id must be in 0..{model.n_particles - 1}, got {spec.particle}")
     length = float(lengths[pid])

@@ -332,3 +332,31 @@ def test_sweep_table_from_run_summaries(tmp_path, capsys):
     assert png.stat().st_size > 1000
     assert main(["sweep", f"1={tmp_path / 'none.csv'}"]) == 1
     assert "none.csv" in capsys.readouterr().err
+
+
+def test_rdf_particle_by_width_or_length(tmp_path, capsys):
+    """The RDF particle chosen by id, by nearest width or length (the thesis: by size, section 3.4)
+    or, by default, the longest: unit spheres scaled to radii 1.0, 1.4, 1.2 (sieve 0; width =
+    length = 2 r) and small spheres (sieve 1, never chosen by size)."""
+    from anm_post.walleffect import choose_particle, particle_widths
+    path = tmp_path / "w.h5"
+    radii = np.array([1.0, 1.4, 1.2, 0.1, 0.1])
+    centres = np.array([[2, 2, 2], [6, 6, 6], [2, 6, 2], [6, 2, 6], [4, 4, 4.0]])
+    write_model(path, [8.0] * 3, [SPHERE], [0], np.zeros(5, int), centres, np.tile(np.eye(3), (5, 1, 1)), radii,
+                np.zeros(5, int), sieves=np.array([0, 0, 0, 1, 1]))
+    set_widths(path, [3.0, 0.2])
+    model = read_model(path)
+    assert np.allclose(particle_widths(model), 2 * radii, rtol=1e-6)
+    assert choose_particle(model, RdfSpec()) == 1                      # the longest
+    assert choose_particle(model, RdfSpec(particle=0)) == 0
+    assert choose_particle(model, RdfSpec(width=2.41)) == 2
+    assert choose_particle(model, RdfSpec(length=1.9)) == 0
+    assert choose_particle(model, RdfSpec(width=0.2)) == 0             # small sieves excluded
+    with pytest.raises(AnmPostError, match="one of id, width and length"):
+        RdfSpec(particle=0, width=2.0)
+    with pytest.raises(AnmPostError, match="width must be positive"):
+        RdfSpec(width=-1.0)
+    assert main(["rdf", str(path), "--width", "-1"]) == 1
+    assert "--width" in capsys.readouterr().err
+    assert main(["rdf", str(path), "--particle", "0", "--length", "2"]) == 1
+    assert "--particle/--width/--length" in capsys.readouterr().err

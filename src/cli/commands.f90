@@ -20,7 +20,7 @@ module anm_cli_commands
    use anm_audit_verify, only: verify_report_type, verify_model, verify_memory, verify_split_type
    use anm_core_resources, only: check_memory, shape_memory
    use anm_sh_expansion, only: sh_expansion_type
-   use anm_contact_studies, only: study_next, study_nbox
+   use anm_contact_studies, only: study_next, study_nbox, nbox_range
    implicit none
    private
 
@@ -97,9 +97,11 @@ contains
             "        penetration exceeds the tolerance"
       case ("study")
          write (unit, '(a)') &
-            "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]", &
+            "  study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S] [--nbox-range polar|eob]", &
             "        EOB parameter studies (docs/contact.md): next = extent-box volume vs N_ext,", &
-            "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle"
+            "        nbox = D_overlap vs N_box for two barely overlapping copies of the particle;", &
+            "        --nbox-range: N_box spaces pi/N_box over the full polar range (polar, ours, default)", &
+            "        or N_box points over the EOB's angular range (eob, the thesis)"
       case default
          found = .false.
       end select
@@ -344,7 +346,8 @@ contains
       end if
    end subroutine write_verify_report
 
-   !> `anm study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S]`: the EOB parameter studies.
+   !> `anm study next|nbox SHAPE_FILE --csv OUT [--order N] [--seed S] [--nbox-range polar|eob]`: the
+   !> EOB parameter studies.
    subroutine study_command(args, unit, error)
       !> Arguments after the command name.
       type(string_type), intent(in) :: args(:)
@@ -353,9 +356,10 @@ contains
       !> Error naming the option, argument or file.
       type(error_type), allocatable, intent(out) :: error
       character(len=:), allocatable :: kind, path, csv, arg
-      integer :: i, order, seed
+      integer :: i, order, seed, reading
       type(sh_expansion_type) :: shape
 
+      reading = nbox_range%polar
       order = -1
       seed = 1
       i = 1
@@ -373,6 +377,22 @@ contains
             call int_option(args, i, "--order", order, error)
          case ("--seed")
             call int_option(args, i, "--seed", seed, error)
+         case ("--nbox-range")
+            if (i + 1 > size(args)) then
+               call fatal_error(error, "option --nbox-range needs a value (polar or eob)", error_code%usage)
+               return
+            end if
+            select case (args(i + 1)%s)
+            case ("polar")
+               reading = nbox_range%polar
+            case ("eob")
+               reading = nbox_range%eob
+            case default
+               call fatal_error(error, "anm study: --nbox-range '"//args(i + 1)%s//"' must be polar or eob", &
+                                error_code%usage)
+               return
+            end select
+            i = i + 1
          case default
             if (is_option(arg)) then
                call fatal_error(error, "anm study: unknown option '"//arg//"'", error_code%usage)
@@ -397,7 +417,7 @@ contains
       case ("next")
          call study_next(shape, order, csv, error)
       case ("nbox")
-         call study_nbox(shape, order, seed, csv, error)
+         call study_nbox(shape, order, seed, csv, error, reading)
       case default
          call fatal_error(error, "anm study: unknown study '"//kind//"' (next or nbox)", error_code%usage)
       end select

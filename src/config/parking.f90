@@ -6,8 +6,10 @@
 !> n_ext, n_box >= 2; contact_method 'eob' or 'newton_raphson' (resolved to `contact_method%...`);
 !> placement 'uniform' or 'void' (resolved to `placement%...`); strategy 'rsa' or 'dense' (resolved
 !> to `parking_strategy%...`); dense_rounds, dense_sweeps >= 1; 0 < dense_target_acceptance < 1;
-!> dense_time_limit >= 0. The strategy and the dense variables are dumped only for 'dense' (an
-!> 'rsa' run's resolved text is unchanged).
+!> dense_time_limit >= 0; last_particle 'closer' or 'overshoot' (resolved to `last_particle%...`);
+!> sieve_carry 'rounding' or 'none' (resolved to `sieve_carry%...`). The strategy and the dense
+!> variables are dumped only for 'dense', last_particle and sieve_carry only when not their default
+!> (a run's resolved text is unchanged by options it does not use).
 !>
 !> Usage:
 !>     call load_parking_config(parking, nml, error)
@@ -23,7 +25,8 @@ module anm_config_parking
    private
 
    public :: parking_config_type, load_parking_config, dump_parking_config, placement, contact_method, &
-      & placement_name, contact_method_name, parking_strategy, strategy_name
+      & placement_name, contact_method_name, parking_strategy, strategy_name, last_particle, sieve_carry, &
+      & last_particle_name, sieve_carry_name
 
    !> Placement of candidate centres.
    type :: placement_enum
@@ -46,6 +49,28 @@ module anm_config_parking
 
    !> The strategies, used as `parking_strategy%dense`.
    type(parking_strategy_enum), parameter :: parking_strategy = parking_strategy_enum()
+
+   !> The rule for the particle that would take a sieve past its target volume.
+   type :: last_particle_enum
+      !> Kept only if it brings the sieve's volume closer to the target (ours, the default).
+      integer :: closer = 1
+      !> Always kept: the sieve ends at or above its target (the thesis, Tables 2.1 and 2.3).
+      integer :: overshoot = 2
+   end type last_particle_enum
+
+   !> The last-particle rules, used as `last_particle%overshoot`.
+   type(last_particle_enum), parameter :: last_particle = last_particle_enum()
+
+   !> What moves to the next sieve when a sieve reaches its target.
+   type :: sieve_carry_enum
+      !> The rounding difference (target minus parked volume, either sign; the default).
+      integer :: rounding = 1
+      !> Nothing: every sieve aims at its own prescribed volume (the thesis).
+      integer :: none = 2
+   end type sieve_carry_enum
+
+   !> The carry rules, used as `sieve_carry%none`.
+   type(sieve_carry_enum), parameter :: sieve_carry = sieve_carry_enum()
 
    !> The parking.
    type :: parking_config_type
@@ -71,6 +96,10 @@ module anm_config_parking
       real(wp) :: dense_time_limit = 0.0_wp
       !> Dense: a round's insertions park at this fraction of their drawn width and grow (0: no growth).
       real(wp) :: dense_grow_scale = 0.0_wp
+      !> Rule for a sieve's last particle, one of `last_particle`.
+      integer :: last_particle = last_particle%closer
+      !> What a sieve that reached its target passes to the next one, one of `sieve_carry`.
+      integer :: sieve_carry = sieve_carry%rounding
    end type parking_config_type
 
 contains
@@ -85,13 +114,13 @@ contains
       type(error_type), allocatable, intent(out) :: error
       integer :: max_locations, max_orientations, max_sizes, max_shapes, max_failures, n_ext, n_box
       character(len=32) :: contact_method
-      character(len=16) :: placement, strategy
+      character(len=16) :: placement, strategy, last_particle, sieve_carry
       logical :: certified
       integer :: dense_rounds, dense_sweeps
       real(wp) :: dense_target_acceptance, dense_time_limit, dense_grow_scale
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
          n_ext, n_box, certified, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
-         dense_time_limit, dense_grow_scale
+         dense_time_limit, dense_grow_scale, last_particle, sieve_carry
       integer :: ig, stat
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -112,6 +141,8 @@ contains
       dense_target_acceptance = self%dense_target_acceptance
       dense_time_limit = self%dense_time_limit
       dense_grow_scale = self%dense_grow_scale
+      last_particle = last_particle_name(self%last_particle)
+      sieve_carry = sieve_carry_name(self%sieve_carry)
       ig = find_group(nml, "parking")
       if (ig > 0) then
          lines = nml%groups(ig)%lines
@@ -189,6 +220,26 @@ contains
                            //"' must be 'rsa' or 'dense'")
          return
       end select
+      select case (to_lower(trim(last_particle)))
+      case ("closer")
+         self%last_particle = last_particle_enum_closer()
+      case ("overshoot")
+         self%last_particle = last_particle_enum_overshoot()
+      case default
+         call config_error(error, nml, ig, "parking", "last_particle", "= '"//trim(last_particle) &
+                           //"' must be 'closer' or 'overshoot'")
+         return
+      end select
+      select case (to_lower(trim(sieve_carry)))
+      case ("rounding")
+         self%sieve_carry = sieve_carry_enum_rounding()
+      case ("none")
+         self%sieve_carry = sieve_carry_enum_none()
+      case default
+         call config_error(error, nml, ig, "parking", "sieve_carry", "= '"//trim(sieve_carry) &
+                           //"' must be 'rounding' or 'none'")
+         return
+      end select
 
    contains
 
@@ -231,6 +282,46 @@ contains
    pure integer function strategy_enum_dense() result(k)
       k = parking_strategy%dense
    end function strategy_enum_dense
+
+   pure integer function last_particle_enum_closer() result(k)
+      k = last_particle%closer
+   end function last_particle_enum_closer
+
+   pure integer function last_particle_enum_overshoot() result(k)
+      k = last_particle%overshoot
+   end function last_particle_enum_overshoot
+
+   pure integer function sieve_carry_enum_rounding() result(k)
+      k = sieve_carry%rounding
+   end function sieve_carry_enum_rounding
+
+   pure integer function sieve_carry_enum_none() result(k)
+      k = sieve_carry%none
+   end function sieve_carry_enum_none
+
+   !> Namelist spelling of a last-particle rule.
+   pure function last_particle_name(p) result(s)
+      !> One of `last_particle`.
+      integer, intent(in) :: p
+      character(len=:), allocatable :: s
+      if (p == last_particle%overshoot) then
+         s = "overshoot"
+      else
+         s = "closer"
+      end if
+   end function last_particle_name
+
+   !> Namelist spelling of a carry rule.
+   pure function sieve_carry_name(p) result(s)
+      !> One of `sieve_carry`.
+      integer, intent(in) :: p
+      character(len=:), allocatable :: s
+      if (p == sieve_carry%none) then
+         s = "none"
+      else
+         s = "rounding"
+      end if
+   end function sieve_carry_name
 
    !> Namelist spelling of a strategy.
    pure function strategy_name(p) result(s)
@@ -286,6 +377,11 @@ contains
                 //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit) &
                 //", dense_grow_scale = "//to_string(self%dense_grow_scale)
       end if
+      ! likewise the thesis' sieve-volume rules, only when chosen
+      if (self%last_particle /= last_particle%closer) text = text//", last_particle = '" &
+                                                             //last_particle_name(self%last_particle)//"'"
+      if (self%sieve_carry /= sieve_carry%rounding) text = text//", sieve_carry = '" &
+                                                           //sieve_carry_name(self%sieve_carry)//"'"
       text = text//" /"//new_line("a")
    end function dump_parking_config
 end module anm_config_parking

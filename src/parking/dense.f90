@@ -185,7 +185,7 @@ contains
             res%reached = res%vol >= target - 0.5_wp * res%vol / max(1, res%count)
          end if
          result(s) = res
-         carry = merge(target - res%vol, 0.0_wp, res%reached)
+         carry = merge(target - res%vol, 0.0_wp, res%reached .and. rp%carry)
       end do
    end subroutine park_dense
 

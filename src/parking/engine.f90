@@ -19,7 +19,7 @@ module anm_parking_engine
    use anm_shapes_library, only: shape_set_type
    use anm_shapes_source, only: load_shape_source
    use anm_config_job, only: run_config_type, placement, write_config
-   use anm_config_parking, only: parking_strategy
+   use anm_config_parking, only: parking_strategy, last_particle, sieve_carry
    use anm_shells_thickness, only: thickness_to_mm, thickness_unit
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, &
       & cache_environment, kind_bytes, body_bytes
@@ -253,6 +253,8 @@ contains
       integer, intent(in), optional :: progress_unit, max_batch
       type(rsa_params_type) :: p
       p%max_failures = cfg%parking%max_failures
+      p%overshoot = cfg%parking%last_particle == last_particle%overshoot
+      p%carry = cfg%parking%sieve_carry == sieve_carry%rounding
       ! kinds are built when first needed: with one shape and one size per particle, each
       ! particle's kind is its stream's first draw, known before its batch runs (M_sand's two
       ! coarse sieves draw about 8 of their 24 shapes); otherwise a sieve's kinds are built when

@@ -5,7 +5,9 @@
 !> A sieve that reaches its volume ends within half a particle of it (the last particle is kept
 !> only if it brings the volume closer to the target); that rounding difference (either sign)
 !> moves to the next sieve so that the cumulative gradation and the total stay on target. A
-!> shortfall from exhausted attempts is not carried. A particle that exhausts its attempts
+!> shortfall from exhausted attempts is not carried. The thesis' rules are options
+!> (`overshoot`: the last particle is always kept, so a sieve ends at or above its target;
+!> `carry = .false.`: every sieve aims at its own prescribed volume; docs/thesis-gaps.md). A particle that exhausts its attempts
 !> counts as a failure; the sieve ends after `max_failures` of them (the thesis: the first).
 !>
 !> Particles are speculated in batches (anm_parking_scheduler): the model does not depend on the
@@ -37,6 +39,11 @@ module anm_parking_rsa
    type :: rsa_params_type
       !> Particles that may exhaust their attempts before a sieve ends.
       integer :: max_failures = 1
+      !> The particle that takes a sieve past its target is always kept (the thesis), else only if
+      !> it brings the volume closer to the target.
+      logical :: overshoot = .false.
+      !> A sieve that reached its target passes its rounding difference to the next one.
+      logical :: carry = .true.
       !> Kinds built per particle when first needed (one shape and one size per particle), else
       !> per sieve.
       logical :: lazy = .false.
@@ -115,7 +122,7 @@ contains
          if (allocated(error)) return
          result(s) = st%res
          run%vol_done = run%vol_done + st%res%vol
-         carry = merge(st%target - st%res%vol, 0.0_wp, st%res%reached)
+         carry = merge(st%target - st%res%vol, 0.0_wp, st%res%reached .and. rp%carry)
       end do
    end subroutine park_rsa
 
@@ -206,7 +213,7 @@ contains
             ! fused multiply-add, as the models were recorded)
             vol = st%res%vol
             vol_with = vol + sc**3 * pk%kinds(k)%volume
-            keep = vol_with <= st%target .or. (vol_with - st%target) <= (st%target - vol)
+            keep = rp%overshoot .or. vol_with <= st%target .or. (vol_with - st%target) <= (st%target - vol)
             if (.not. keep) then
                st%done = .true.
                st%res%reached = .true.
