@@ -16,13 +16,16 @@ def main(argv=None) -> int:
     r.add_argument("--workers", type=int, default=2, help="runs at a time (one OpenMP thread each)")
     r.add_argument("--seeds", type=int, default=len(J.SEEDS))
     r.add_argument("--force", action="store_true", help="run again even when a result exists")
+    r.add_argument("--any-engine", action="store_true",
+                   help="keep results made by another engine commit (the page lists every engine commit)")
     sub.add_parser("extras", help="EOB studies and g(t) of the seed-1 M_sand models")
     sub.add_parser("collect", help="gather the results into docs/studies/data.json")
     sub.add_parser("page", help="write docs/studies.md and its figures from docs/studies/data.json")
     args = p.parse_args(argv)
     extras_file = run.SCRATCH / "extras.json"
     if args.cmd == "run":
-        run.run_all(args.anm, args.workers, tuple(range(1, args.seeds + 1)), args.force)
+        run.run_all(args.anm, args.workers, tuple(range(1, args.seeds + 1)), args.force,
+                    any_engine=args.any_engine)
     elif args.cmd == "extras":
         from . import extras, page
         page.FIGURES.mkdir(parents=True, exist_ok=True)

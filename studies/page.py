@@ -96,19 +96,26 @@ class Ensemble:
 # -- sections ----------------------------------------------------------------------------------
 def provenance(data: dict) -> str:
     runs = data["runs"]
-    engines = sorted({r["engine"] for r in runs})
-    commits = sorted({r["commit"] for r in runs})
+    engines = {}
+    for r in runs:
+        engines[r["engine"]] = engines.get(r["engine"], 0) + 1
     seeds = sorted({r["seed"] for r in runs})
     cpu = sum(r["cpu_s"] for r in runs)
-    eng = ", ".join(f"`{e[:12]}`" for e in engines)
-    com = ", ".join(f"`{c[:12]}{'-dirty' if c.endswith('-dirty') else ''}`" for c in commits)
-    return (f"This page is written by `bash scripts/studies.sh` (studies/page.py) from the per-seed results in\n"
+    eng = ", ".join(f"`{e[:12]}{'-dirty' if e.endswith('-dirty') else ''}` ({n} runs)"
+                    for e, n in sorted(engines.items()))
+    text = (f"This page is written by `bash scripts/studies.sh` (studies/page.py) from the per-seed results in\n"
             f"[studies/data.json](studies/data.json); do not edit it by hand: `post/tests/test_studies_page.py`\n"
             f"fails when the page differs from what the generator writes, and re-runs the cheapest job to\n"
-            f"check that the engine still gives its recorded numbers. The figures and tables below come from\n"
-            f"{len(runs)} runs (seeds {seeds[0]}-{seeds[-1]}) of the engine as of commit {eng} (the last change\n"
-            f"to src/, app/, include/ or fpm.toml), run from commit {com}; {cpu:,.0f} s CPU in all, one\n"
-            f"OpenMP thread per run (the model does not depend on the thread count, docs/parallel.md).")
+            f"check that the engine still gives its recorded numbers. The tables and ensemble figures come\n"
+            f"from {len(runs)} runs (seeds {seeds[0]}-{seeds[-1]}) of the engine as of commit {eng} (the last\n"
+            f"change to src/, app/, include/ or fpm.toml before the run; data.json also records the\n"
+            f"checkout's commit of each run); {cpu:,.0f} s CPU in all, one OpenMP thread per run (the model\n"
+            f"does not depend on the thread count, docs/parallel.md).")
+    if len(engines) > 1:
+        text += ("\nRuns of an earlier engine commit were kept (`python3 -m studies run --any-engine`) where\n"
+                 "the later commits do not change the models (the identical-model digests of\n"
+                 "post/tests/test_identical_models.py, and the re-run of test_studies_page.py).")
+    return text
 
 
 def how_to_read(data: dict) -> str:
@@ -307,7 +314,9 @@ def shells_section(data: dict) -> str:
     out = ["## Shell thickness (Tables 2.1, 2.2, Figs 2.16, 2.17)", "",
            "`inputs/table2_1.nml`: 66 mm non-periodic box, four sieves 7-11 mm of the real coarse shapes at\n"
            "order 14, a quarter of a total PD of 0.25 each, 2000 locations, one shape, size and orientation\n"
-           "per particle, shells that may not overlap, their thickness 0-2 % of each particle's length."]
+           "per particle, shells that may not overlap, their thickness 0-2 % of each particle's length.\n"
+           "The ensemble runs every other row of the thesis' table (0, 0.4, ..., 2 %) to keep within its CPU\n"
+           "budget; `bash scripts/study_shells.sh` runs all eleven rows for one seed."]
     if not e.values:
         return "\n".join(out + ["", "(No Table 2.1 runs in data.json.)"])
     r21, r22 = [], []
@@ -396,12 +405,12 @@ def figures(data: dict, folder: pathlib.Path = FIGURES) -> list[pathlib.Path]:
     e = Ensemble(data, "table2_1")
     if e.values:
         fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
-        xs = [100 * v for v in e.values]
         _errorbars(ax[0], e, e.values, "fraction", 100)
-        ax[0].plot(xs, [T.TABLE2_1[v][1] for v in e.values], "s--", label="thesis")
+        tx = sorted(T.TABLE2_1)
+        ax[0].plot([100 * v for v in tx], [T.TABLE2_1[v][1] for v in tx], "s--", label="thesis")
         ax[0].set(xlabel="shell thickness (% of L)", ylabel="total PD", title="Fig 2.16(a)")
         _errorbars(ax[1], e, e.values, "count", 100)
-        ax[1].plot(xs, [T.TABLE2_2[v][1] for v in e.values], "s--", label="thesis")
+        ax[1].plot([100 * v for v in tx], [T.TABLE2_2[v][1] for v in tx], "s--", label="thesis")
         ax[1].set(xlabel="shell thickness (% of L)", ylabel="particles", title="Fig 2.16(b)")
         _errorbars(ax[2], e, e.values, "shell_fraction", 100)
         ax[2].set(xlabel="shell thickness (% of L)", ylabel="shell volume fraction", title="Fig 2.17")

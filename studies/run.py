@@ -60,8 +60,9 @@ def read_summary(path: pathlib.Path) -> dict:
 
 
 def run_job(anm: str, job: J.Job, scratch: pathlib.Path, head: str, engine: str, force: bool = False,
-            shapes: str | None = None) -> dict:
-    """Run one job (unless its result is there for this namelist and engine); its result record."""
+            shapes: str | None = None, any_engine: bool = False) -> dict:
+    """Run one job (unless its result is there for this namelist and engine, or for this namelist
+    and any engine with `any_engine`); its result record."""
     folder = scratch / job.name
     folder.mkdir(parents=True, exist_ok=True)
     try:
@@ -72,18 +73,21 @@ def run_job(anm: str, job: J.Job, scratch: pathlib.Path, head: str, engine: str,
     done = folder / "result.json"
     if done.is_file() and not force:
         old = json.loads(done.read_text())
-        if old.get("namelist") == text and old.get("engine") == engine:
+        if old.get("namelist") == text and (any_engine or old.get("engine") == engine):
             return old
     (folder / "run.nml").write_text(text)
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    start = time.time()
-    with open(folder / "run.log", "w") as log:
-        proc = subprocess.Popen([anm, "run", "--force", str(folder / "run.nml")], cwd=J.ROOT,
-                                stdout=log, stderr=subprocess.STDOUT, env=env)
-        _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{job.name}: anm run failed ({proc.returncode}), see {folder / 'run.log'}")
+    for attempt in range(3):        # a run killed by a signal (not by its own error) is run again
+        start = time.time()
+        with open(folder / "run.log", "w") as log:
+            proc = subprocess.Popen([anm, "run", "--force", str(folder / "run.nml")], cwd=J.ROOT,
+                                    stdout=log, stderr=subprocess.STDOUT, env=env)
+            _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = code = os.waitstatus_to_exitcode(status)
+        if code >= 0:
+            break
+    if code != 0:
+        raise RuntimeError(f"{job.name}: anm run failed ({code}), see {folder / 'run.log'}")
     result = {"study": job.study, "value": job.value, "seed": job.seed, "commit": head,
               "engine": engine,
               "namelist": text, "cpu_s": round(usage.ru_utime + usage.ru_stime, 2),
@@ -98,17 +102,24 @@ def run_job(anm: str, job: J.Job, scratch: pathlib.Path, head: str, engine: str,
 
 
 def run_all(anm: str, workers: int = 2, seeds=J.SEEDS, force: bool = False,
-            scratch: pathlib.Path = SCRATCH) -> list[dict]:
+            scratch: pathlib.Path = SCRATCH, any_engine: bool = False) -> list[dict]:
     """Every job (seed by seed), `workers` at a time; the results in job order."""
     head, engine = commit(), engine_commit()
     todo = J.all_jobs(seeds)
     results = [None] * len(todo)
+    failed = []
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(run_job, anm, job, scratch, head, engine, force): i for i, job in enumerate(todo)}
+        futures = {pool.submit(run_job, anm, job, scratch, head, engine, force, None, any_engine): i for i, job in enumerate(todo)}
         for n, fut in enumerate(concurrent.futures.as_completed(futures), 1):
             i = futures[fut]
-            results[i] = fut.result()
-            r = results[i]
+            try:
+                results[i] = r = fut.result()
+            except Exception as exc:        # report, go on with the other jobs, fail at the end
+                failed.append(todo[i].name)
+                print(f"[{n}/{len(todo)}] {todo[i].name}: FAILED: {exc}", file=sys.stderr, flush=True)
+                continue
             print(f"[{n}/{len(todo)}] {todo[i].name}: PD {r['total']['fraction']:.4f}, "
                   f"{r['total']['count']} particles, {r['cpu_s']} s CPU", file=sys.stderr, flush=True)
+    if failed:
+        raise RuntimeError(f"{len(failed)} jobs failed: {', '.join(failed)}")
     return results
