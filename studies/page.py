@@ -36,7 +36,7 @@ def far(thesis: float, xs) -> bool:
 def ms(xs, digits: int) -> str:
     """'mean ± sd' with `digits` decimals."""
     m, sd = mean_sd(xs)
-    return f"{m:.{digits}f} ± {sd:.{digits}f}"
+    return f"{m:,.{digits}f} ± {sd:,.{digits}f}"
 
 
 def pair(thesis: float, xs, digits: int, tdigits: int | None = None) -> str:
@@ -44,7 +44,7 @@ def pair(thesis: float, xs, digits: int, tdigits: int | None = None) -> str:
     ours = ms(xs, digits)
     if far(thesis, xs):
         ours = f"{MARK}{ours}{MARK}"
-    t = f"{thesis:.{digits if tdigits is None else tdigits}f}"
+    t = f"{thesis:,.{digits if tdigits is None else tdigits}f}"
     return f"{t} / {ours}"
 
 
@@ -118,6 +118,32 @@ def provenance(data: dict) -> str:
     return text
 
 
+def overview(data: dict) -> str:
+    """Per thesis table: in how many rows the thesis' total PD and particle count lie beyond two
+    standard deviations of our mean."""
+    rows = []
+
+    def line(name, e, vals, thesis_pd, thesis_n):
+        if not vals:
+            return
+        pd_far = [v for v in vals if far(thesis_pd(v), e.total(v, "fraction"))]
+        n_far = [v for v in vals if far(thesis_n(v), e.total(v, "count"))]
+        lower = sum(mean_sd(e.total(v, "fraction"))[0] < thesis_pd(v) for v in pd_far)
+        rows.append([name, e.n(), f"{len(pd_far)} of {len(vals)} ({lower} lower)",
+                     f"{len(n_far)} of {len(vals)}", f"[thesis-gaps.md]({GAPS})"])
+
+    e = Ensemble(data, "table2_1")
+    line("2.1, 2.2 (shell thickness)", e, e.values, lambda v: T.TABLE2_1[v][1], lambda v: T.TABLE2_2[v][1])
+    e = Ensemble(data, "table2_3")
+    line("2.3 (random locations)", e, e.values, lambda v: T.TABLE2_3[v][1], lambda v: T.TABLE2_3[v][0])
+    e = Ensemble(data, "msand")
+    for case, name in (("shaped", "3.1 (M_sand)"), ("spheres", "3.2 (M_sand, spherical sand)")):
+        if case in e.values:
+            line(name, e, [case], lambda v: sum(x[1] for x in T.MSAND[v]), lambda v: sum(x[2] for x in T.MSAND[v]))
+    return table(["thesis table", "seeds", "rows: total PD beyond 2 sd", "rows: particles beyond 2 sd",
+                  "why"], rows)
+
+
 def how_to_read(data: dict) -> str:
     return ("## How to read the ensemble tables\n\n"
             "Each cell is `thesis / ours`: the thesis' single value, then our mean ± standard deviation\n"
@@ -127,7 +153,7 @@ def how_to_read(data: dict) -> str:
             "total packing density (0.25, 0.355); ours are converted the same way (the sieve's fraction of\n"
             "the box divided by the intended total). Why the densities differ, part by part (the failure\n"
             f"rule, the contact test, the width-to-volume relation, the sieve-volume rules), is in\n"
-            f"[thesis-gaps.md]({GAPS}); this page gives the numbers.")
+            f"[thesis-gaps.md]({GAPS}); this page gives the numbers.\n\n" + overview(data))
 
 
 def eob_section(data: dict) -> str:
@@ -145,7 +171,12 @@ def eob_section(data: dict) -> str:
     pts = [n for n in (4, 20, 40, 80, 160) if n in nxt]
     vols = ", ".join(f"{nxt[n]:,.0f} at N_ext = {n}" for n in pts)
     nbox = eob["nbox"]
-    rows = [[str(int(n)), f"{d:.3f}"] for n, d in nbox]
+    head_rows = [(int(n), d) for n, d in nbox if n <= 150]
+    tail_rows = [d for n, d in nbox if n > 150]
+    wide = table(["N_box"] + [str(n) for n, _ in head_rows], [["D_overlap"] + [f"{d:.3f}" for _, d in head_rows]])
+    if tail_rows:
+        wide += (f"\n\nFrom N_box = {int(nbox[len(head_rows)][0])} to {int(nbox[-1][0])}: "
+                 f"{min(tail_rows):.3f}-{max(tail_rows):.3f}.")
     plateau = [d for n, d in nbox if n >= 90]
     return (head + "\n\n"
             f"Extent-box volume against N_ext (shape units^3): {vols}; the certified box (docs/contact.md)\n"
@@ -154,7 +185,7 @@ def eob_section(data: dict) -> str:
             "D_overlap against N_box for two particles in minimal overlap (the thesis found a plateau from\n"
             f"N_box ~ 90; here {min(plateau):.3f}-{max(plateau):.3f} from 90 on). Our curve is noisier because the scan\n"
             "points of N_box = n are not a refinement of those of n - 10 (docs/contact.md: N_box here spans\n"
-            "the full polar range):\n\n" + table(["N_box", "D_overlap"], rows))
+            "the full polar range):\n\n" + wide)
 
 
 def msand_section(data: dict) -> str:
@@ -203,8 +234,8 @@ def msand_section(data: dict) -> str:
             f"Sieve 1 keeps {min(c1)}-{max(c1)} coarse particles of 9.9-10 mm ({ms(f1, 4)} of the box) over the\n"
             f"seeds, the thesis {t1[2]} ({t1[1]}). The mean volume of one such particle is {ms(v1, 0)} mm^3 here\n"
             f"against {t1[1] * box / t1[2]:.0f} mm^3 implied by the thesis' table, and of one sand grain\n"
-            f"{ms(v3, 5)} mm^3 against {t3[1] * box / t3[2]:.5f} mm^3: the gap is the width-to-volume relation\n"
-            f"and the sieve-volume rule, explained in [thesis-gaps.md]({GAPS}) (M_sand). So phi_B (Eq 3.6) is\n"
+            f"{ms(v3, 6)} mm^3 against {t3[1] * box / t3[2]:.6f} mm^3. The parts of this gap (the width-to-volume\n"
+            f"relation, the sieve-volume rules) are explained in [thesis-gaps.md]({GAPS}), M_sand. So phi_B (Eq 3.6) is\n"
             f"{ms(phib, 4)} here against 0.08 / (1 - 0.15) = 0.094 in the thesis (which rounds to 0.09).",
             "",
             f"The sand counts ({thousands(min(c3))}-{thousands(max(c3))} shaped grains over the seeds"
@@ -215,6 +246,11 @@ def msand_section(data: dict) -> str:
             "sieve, and a sphere of diameter w has more volume than a real sand grain of width w, hence fewer\n"
             "spheres than shaped grains. The thesis' nearly equal counts (202,736 and 202,852) suggest its\n"
             "order-0 spheres kept each grain's volume.", ""]
+        if "spheres" in e.values and all(
+                a["sieves"][:2] == b["sieves"][:2] for a, b in zip(e.runs["shaped"], e.runs["spheres"])
+                if a["seed"] == b["seed"]):
+            out += ["With the same seed the two cases have the same coarse particles (sieves 1 and 2 are equal\n"
+                    "seed by seed); only the sand differs.", ""]
     out += [wall_section(data)]
     return "\n".join(out)
 
@@ -265,8 +301,9 @@ def wall_section(data: dict) -> str:
         a = {d["density"]: d for d in wall["shaped"]["densities"]}[1.0]
         b = {d["density"]: d for d in wall["spheres"]["densities"]}[1.0]
         diff = max(abs(x - y) for x, y in zip(a["g"], b["g"]))
+        verdict = ("holds" if diff <= 0.1 else "does not hold here")
         out += ["", f"The two profiles (shaped, spherical sand) differ by at most {diff:.3f} per layer at rho_s = 1:\n"
-                    "the thesis' conclusion (the sand shape matters little next to the coarse aggregate's) holds.\n"
+                    f"the thesis' conclusion (the sand shape matters little next to the coarse aggregate's) {verdict}.\n"
                     "The per-slice standard deviation does not fall with rho_s: it is the spread of the slice\n"
                     "population; what falls is the standard error of g (the thesis' reading of Figs 3.10/3.13).\n"
                     "Slices against the 3D value (Eq 3.11): docs/walleffect.md."]
@@ -294,14 +331,17 @@ def locations_section(data: dict) -> str:
     below = sum(far(T.TABLE2_3[v][1], e.total(v, "fraction")) and
                 mean_sd(e.total(v, "fraction"))[0] < T.TABLE2_3[v][1] for v in e.values)
     empty5 = [v for v in e.values if statistics.fmean(e.share(v, 4)) < 0.02]
+    n_empty5 = sum(c == 0 for v in e.values for c in e.sieve(v, 4, "count"))
+    n_runs = sum(len(e.runs[v]) for v in e.values)
     fewer = sum(statistics.fmean(e.total(v, "count")) < T.TABLE2_3[v][0] for v in e.values)
     out += [f"Our total PD goes from {ms(e.total(lo, 'fraction'), 3)} at {lo} locations to "
             f"{ms(e.total(hi, 'fraction'), 3)} at {hi}\n(the thesis: {T.TABLE2_3[lo][1]} to {T.TABLE2_3[hi][1]}); "
             f"it is lower than the thesis' by more than two standard\ndeviations in {below} of {len(e.values)} rows, "
             f"and we pack fewer particles on average in {fewer} of {len(e.values)}.\n"
-            + (f"Sieve 5 (6-7 mm) keeps on average less than 0.02 of its share at {', '.join(map(str, empty5))}\n"
-               "locations: a sieve whose first particle fails ends empty and leaves its volume to the next.\n"
-               if empty5 else "")
+            + f"Sieve 5 (6-7 mm) stays empty in {n_empty5} of {n_runs} runs (a sieve whose first particle fails\n"
+            "every location ends empty and leaves its volume to the next sieve"
+            + (f"; its mean share is below 0.02 at {', '.join(map(str, empty5))} locations" if empty5 else "")
+            + ").\n"
             + "The thesis' counts suggest its engine went on after a failed particle; with `&parking\n"
             "max_failures = 100` and void-targeted placement (`inputs/table2_3_void.nml`) the same setup\n"
             "reaches its intended density (docs/parallel.md). The gap at the thesis' own rule, part by part:\n"
@@ -371,7 +411,8 @@ def render(data: dict) -> str:
         ["shell thickness sweep", "Tables 2.1, 2.2, Figs 2.16, 2.17",
          "`bash scripts/studies.sh` (one seed: `bash scripts/study_shells.sh`)"]])
     parts = ["# The thesis' studies reproduced", "", provenance(data), "",
-             "Every thesis table is re-run over ten seeds: `bash scripts/studies.sh` runs the jobs in\n"
+             f"Every thesis table is re-run over {len({r['seed'] for r in data['runs']})} seeds: "
+             "`bash scripts/studies.sh` runs the jobs in\n"
              "`out/studies/ensemble/` (studies/jobs.py: the namelists of `inputs/` with the swept setting and\n"
              "the seed changed), gathers their summary CSVs into docs/studies/data.json and writes this page\n"
              "and its figures. The single-seed scripts below remain for one run at a time.", "",
