@@ -26,9 +26,9 @@ class Study:
 
 
 STUDIES = {
-    # every other row of the thesis' Table 2.1 (0, 0.4, ..., 2 %): the CPU budget of one ensemble
-    "table2_1": Study("table2_1", "Tables 2.1, 2.2: shell thickness",
-                      (0.0, 0.004, 0.008, 0.012, 0.016, 0.020), "shell thickness (% of L)"),
+    "table2_1": Study("table2_1", "Tables 2.1, 2.2: shell thickness", (
+        0.0, 0.002, 0.004, 0.006, 0.008, 0.010, 0.012, 0.014, 0.016, 0.018, 0.020),
+        "shell thickness (% of L)"),
     "table2_3": Study("table2_3", "Table 2.3: random locations",
                       (30, 60, 90, 120, 140, 285, 450, 975, 1500), "random locations"),
     "msand": Study("msand", "Tables 3.1, 3.2: M_sand", ("shaped", "spheres"), "sand"),
