@@ -1,4 +1,4 @@
-"""Every third-party import of the Python code (post/, bench/, scripts/) is installed, pinned, by
+"""Every third-party import of the Python code (post/, bench/, scripts/, studies/) is installed, pinned, by
 scripts/setup.sh: a fresh machine that ran the setup can import everything the tests import
 (issue 12, item 1). Imports are found with ast (also those inside functions), so a module that is
 imported only on one code path is covered too."""
@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-FOLDERS = ("post", "bench", "scripts")
+FOLDERS = ("post", "bench", "scripts", "studies")
 
 #: Import name -> PyPI package name, where they differ or where one package provides several names.
 IMPORT_TO_PACKAGE = {

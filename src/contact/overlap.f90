@@ -827,9 +827,12 @@ contains
                   status = sep_unsure
                   return
                end if
-            else
+            else if (nwork < max_list) then
                nwork = nwork + 1
                work(nwork) = list(n)
+            else
+               status = sep_unsure
+               return
             end if
          end do
          nlist = nwork
