@@ -46,6 +46,14 @@ contains
       end if
    end function scratch_dir
 
+   !> Remove a test's folder (under /tmp, made by scratch_dir) and its entries.
+   subroutine remove_dir(dir)
+      character(len=*), intent(in) :: dir
+      integer :: stat
+      if (index(dir, "/tmp/anm-test-kind-cache-") /= 1) return
+      call execute_command_line("rm -rf '"//dir//"'", exitstat=stat)
+   end subroutine remove_dir
+
    !> Two ellipsoids, one sieve, shells of 0.05 mm (two width levels drawn): the kinds to build.
    subroutine setup(ks, kinds, dir)
       type(kind_set_type), intent(out) :: ks
@@ -140,6 +148,7 @@ contains
                     "exclusion shells: no bare patch arrays, a shell body")
          if (allocated(error)) return
       end do
+      call remove_dir(dir)
    end subroutine test_reuse
 
    subroutine test_reject(error)
@@ -207,6 +216,7 @@ contains
       call build_some(ks3, k3, error)
       if (allocated(error)) return
       call check(error, ks3%cache%hits == 3 .and. ks3%cache%rejected == 1, "a text file is rejected")
+      call remove_dir(dir)
    end subroutine test_reject
 
    subroutine test_layout(error)
