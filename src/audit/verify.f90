@@ -183,19 +183,7 @@ contains
       ends = 0
       if (filtered .and. .not. present(filter)) call count_ends(model, key, rho, cl, ends)
       if (present(filter)) ends = merge(min_filter_ends, 0, filtered)
-      allocate (bodies(nkey))
-      has_body = .false.
-      !$omp parallel do default(none) shared(samp, nkey, model, bodies, has_body, ends) private(k) schedule(dynamic)
-      do k = 1, nkey
-         if (ends(k) < min_filter_ends) cycle
-         block
-            type(error_type), allocatable :: berr
-            ! a shape the contact code cannot certify (not star-shaped) is always sampled
-            call new_contact_body(bodies(k), model%shapes(samp(k)%shape), berr, nused=samp(k)%order)
-            has_body(k) = .not. allocated(berr)
-         end block
-      end do
-      !$omp end parallel do
+      call build_bodies(model, samp, ends, bodies, has_body)
       npairs = 0
       ncleared = 0
       nover = 0
@@ -218,9 +206,7 @@ contains
          end do
          !$omp do schedule(dynamic, 16)
          do p = 1, model%np
-            if (nranks > 1) then
-               if (owner_slab(cw(1, p), model%box(1), nranks) /= rank) cycle
-            end if
+            if (owner_slab(cw(1, p), model%box(1), nranks) /= rank) cycle   ! this process' slab
             if (.not. model%periodic) then
                dw = wall_depth(model, samp, key, p)
                if (dw > report%tolerance) nwall = nwall + 1
@@ -285,6 +271,32 @@ contains
       integer, intent(in) :: nslab
       r = max(0, min(nslab - 1, int(x / length * nslab)))
    end function owner_slab
+
+   !> The contact bodies of the (shape, order) pairs with at least min_filter_ends pair ends, for
+   !> the certified filter (has_body false for the others and for shapes the contact code cannot
+   !> certify, which are always sampled).
+   subroutine build_bodies(model, samp, ends, bodies, has_body)
+      type(model_type), intent(in) :: model
+      type(sampled_type), intent(in) :: samp(:)
+      integer, intent(in) :: ends(:)
+      type(contact_body_type), allocatable, intent(out) :: bodies(:)
+      logical, intent(out) :: has_body(:)
+      integer :: k, nkey
+      nkey = size(samp)
+      allocate (bodies(nkey))
+      has_body = .false.
+      !$omp parallel do default(none) shared(samp, nkey, model, bodies, has_body, ends) private(k) schedule(dynamic)
+      do k = 1, nkey
+         if (ends(k) < min_filter_ends) cycle
+         block
+            type(error_type), allocatable :: berr
+            ! a shape the contact code cannot certify (not star-shaped) is always sampled
+            call new_contact_body(bodies(k), model%shapes(samp(k)%shape), berr, nused=samp(k)%order)
+            has_body(k) = .not. allocated(berr)
+         end block
+      end do
+      !$omp end parallel do
+   end subroutine build_bodies
 
    !> Per (shape, order): the number of pair ends (pairs whose bounding spheres intersect, each
    !> counted for both particles' (shape, order)).
