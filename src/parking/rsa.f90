@@ -277,7 +277,7 @@ contains
       integer, intent(in) :: j
       associate (kj => pk%kinds(pk%kind_of(j)))
          call vg%block_particle(kj%body%shape, pk%center(:, j), pk%rot(:, :, j), pk%scale(j), pk%scale(j) * kj%body%r_min, &
-                                pk%rho(j))
+                                pk%rho(j), body=kj%body)
       end associate
    end subroutine block_particle
 
