@@ -827,9 +827,13 @@ contains
                   status = sep_unsure
                   return
                end if
-            else
+            else if (nwork < max_list) then
                nwork = nwork + 1
                work(nwork) = list(n)
+            else
+               ! list overflow (was an out-of-bounds write): stage 4b decides
+               status = sep_unsure
+               return
             end if
          end do
          nlist = nwork
