@@ -11,10 +11,13 @@ Usage (from the repository root; `bash scripts/benchmarks.sh` installs and build
     python3 bench/run_all.py [--out docs/performance.md] [--skip NAME ...] [--only NAME ...]
 
 NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing, verify,
-shellsmm (verify: `anm verify` of M_sand against its parking; shellsmm: `inputs/shells_mm.nml`, its
-first sieve alone (start-up) without and with a warm kind cache, the whole job with shells (no
-cache, warm cache) and without shells, the kinds' memory; both beside the reference loop's time in
-the same run). Every job runs with ANM_CACHE=off unless it tests the cache.
+shellsmm, finesieves (verify: `anm verify` of M_sand against its parking; shellsmm:
+`inputs/shells_mm.nml`, its first sieve alone (start-up) without and with a warm kind cache, the
+whole job with shells (no cache, warm cache) and without shells, the kinds' memory; finesieves:
+`inputs/concrete.nml` with `strategy = 'rsa'`, attempts per second (wall and CPU) of each sieve,
+the three finest being the dense-regime figure; `--concrete-box L` runs it in an L mm box instead
+of 40 mm for a quicker look; all beside the reference loop's time in the same run). Every job runs
+with ANM_CACHE=off unless it tests the cache.
 Jobs that need ../shared/shapes (msand, table23, million with real shapes, slicing of M_sand)
 are reported as "not run" when the folder is missing.
 """
@@ -25,6 +28,7 @@ import datetime
 import os
 import platform
 import re
+import resource
 import shlex
 import shutil
 import statistics
@@ -38,7 +42,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 SHAPES = SHARED / "shapes"
-ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing", "verify", "shellsmm")
+ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing", "verify", "shellsmm",
+       "finesieves")
 
 
 @dataclass
@@ -423,6 +428,81 @@ def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
                               + models + "\n" + ref_text + "\n" + ref2))
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time (s) of a running process, from /proc (nan when unreadable)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
+def sieve_times(anm: str, nml: Path, threads: int) -> tuple[list[tuple[int, int, float, float]], float, float, int]:
+    """Run `anm run` and read, as each sieve ends, its attempts and the process's wall and CPU time:
+    [(sieve, attempts, wall at its end, CPU at its end)], total wall, total CPU, exit code."""
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+    t0 = time.time()
+    p = subprocess.Popen([anm, "run", "--force", str(nml)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    rows = []
+    assert p.stdout is not None
+    for line in p.stdout:
+        m = re.match(r"sieve (\d+) done: .*?, (\d+) attempts,", line)
+        if m:
+            rows.append((int(m.group(1)), int(m.group(2)), time.time() - t0, cpu_seconds(p.pid)))
+    rc = p.wait()
+    wall = time.time() - t0
+    return rows, wall, resource_children_cpu(), rc
+
+
+def finesieves_section(rep: Report, anm: str, tmp: Path, box: float) -> None:
+    """inputs/concrete.nml with `strategy = 'rsa'`: attempts per second of every sieve (wall and per
+    CPU second), beside the reference loop run just before and after."""
+    if not SHAPES.is_dir():
+        rep.sections.append("### Fine sieves among coarse particles\n\nnot run: ../shared/shapes missing\n")
+        return
+    text = (ROOT / "inputs/concrete.nml").read_text()
+    text = re.sub(r"strategy\s*=\s*'dense'[^/]*/", "strategy = 'rsa' /", text)
+    text = re.sub(r"directory\s*=\s*'[^']*'", f"directory = '{tmp / 'finesieves'}'", text)
+    if box != 40.0:
+        text = text.replace("length = 40.0, 40.0, 40.0", f"length = {box}, {box}, {box}")
+    nml = tmp / "finesieves.nml"
+    nml.write_text(text)
+    ref_text, tr = reference_loop(tmp)
+    before = resource_children_cpu()
+    rows, wall, cpu_all, rc = sieve_times(anm, nml, 2)
+    cpu_run = cpu_all - before
+    ref2, tr2 = reference_loop(tmp)
+    lines = ["| sieve | attempts | wall (s) | CPU (s) | attempts/s (wall) | attempts per CPU s |", "|---|---|---|---|---|---|"]
+    w0, c0 = 0.0, 0.0
+    fine = []
+    for s, n, w, c in rows:
+        dw, dc = w - w0, c - c0
+        lines.append(f"| {s} | {n:,} | {dw:.1f} | {dc:.1f} | {n / max(dw, 1e-9):,.0f} | {n / max(dc, 1e-9):,.0f} |")
+        if s >= 4:
+            fine.append((n, dw, dc))
+        w0, c0 = w, c
+    label = "inputs/concrete.nml" + ("" if box == 40.0 else f" in a {box:g} mm box")
+    if fine:
+        n = sum(f[0] for f in fine)
+        dw = sum(f[1] for f in fine)
+        dc = sum(f[2] for f in fine)
+        tref = statistics.mean([t for t in (tr, tr2) if t == t] or [float("nan")])
+        rep.target(f"fine sieves (4-6) of {label}, rsa, 2 threads: attempts/s",
+                   f"{n / dw:,.0f} per wall s, {n / dc:,.0f} per CPU s; reference loop {tref:.1f} s", ">= 10x 10,000",
+                   None)
+    rep.sections.append(block(f"Fine sieves among coarse particles ({label}, `strategy = 'rsa'`)",
+                              f"OMP_NUM_THREADS=2 anm run concrete_rsa.nml (inputs/concrete.nml, strategy = 'rsa')",
+                              "\n".join(lines) + f"\nwhole run: {wall:.1f} s wall, {cpu_run:.1f} s CPU, exit {rc}\n"
+                              + ref_text + "\n" + ref2))
+
+
+def resource_children_cpu() -> float:
+    """CPU time (s) of the waited-for children so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def rsa_section(rep: Report, anm: str, tmp: Path, rows: list[str], speedups: dict) -> None:
     src = SHARED / "bench/rsa_spheres.c"
     edge = 140.82046803408818   # 200,000 spheres of radius 1 at a packing fraction of 0.30
@@ -492,6 +572,8 @@ def main() -> int:
     ap.add_argument("--skip", nargs="*", default=[], choices=ALL)
     ap.add_argument("--only", nargs="*", default=[], choices=ALL)
     ap.add_argument("--anm", default=str(ROOT / "build/install/bin/anm"))
+    ap.add_argument("--concrete-box", type=float, default=40.0,
+                    help="box edge (mm) of the finesieves job (default 40, inputs/concrete.nml's)")
     args = ap.parse_args()
     which = set(args.only or ALL) - set(args.skip)
     flags = os.environ.get("ANM_FFLAGS", "-march=native -ffpe-summary=none")
@@ -521,6 +603,9 @@ def main() -> int:
         if "shellsmm" in which:
             print("== shellsmm", file=sys.stderr)
             shellsmm_section(rep, args.anm, tmp)
+        if "finesieves" in which:
+            print("== finesieves", file=sys.stderr)
+            finesieves_section(rep, args.anm, tmp, args.concrete_box)
         if "slicing" in which:
             model = ROOT / "out/msand/model.h5"
             if SHAPES.is_dir():

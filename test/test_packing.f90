@@ -5,7 +5,9 @@ module test_packing
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
    use anm_core_random, only: rng_type, new_rng
-   use anm_shapes_analytic, only: sphere_shape
+   use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
+   use anm_contact_body, only: contact_body_type
+   use anm_parking_void_grid, only: void_grid_type, new_void_grid
    use anm_geometry_rotation, only: random_rotation
    use anm_contact_body, only: new_contact_body
    use anm_parking_kinds, only: particle_kind_type
@@ -29,7 +31,8 @@ contains
               new_unittest("add/remove/move: fits = sphere overlap, periodic", test_fits_periodic), &
               new_unittest("add/remove/move: fits = sphere overlap and walls", test_fits_walls), &
               new_unittest("compact keeps the particles and the answers", test_compact), &
-              new_unittest("fits since a mark tests only later particles", test_since)]
+              new_unittest("fits since a mark tests only later particles", test_since), &
+              new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds)]
    end subroutine collect_packing
 
    !> A packing of unit-sphere kinds (kind 1) with periodic or walled box.
@@ -230,4 +233,43 @@ contains
       call check(error, pk%fits(1, [2.5_wp, 3.0_wp, 2.0_wp], rot, 0.5_wp, scratch, since=m), &
                  "the removed particle is gone")
    end subroutine test_since
+
+   !> The void grid blocks the same cells whether a cell is decided by the contact body's certified
+   !> patch bounds first (the fast path) or by evaluating r at every cell (brute force): elongated
+   !> ellipsoids at order 14 in random poses, periodic and walled boxes, an inscribed radius for
+   !> which the radial offset is used (r_in above the cell half-diagonal).
+   subroutine test_void_bounds(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(contact_body_type) :: body
+      type(void_grid_type) :: fast, slow
+      type(rng_type) :: rng
+      real(wp) :: box(3), rr(3, 3), x(3), sc
+      integer :: i, iper, nb
+      logical :: periodic
+      call new_contact_body(body, ellipsoid_shape(1.0_wp, 0.55_wp, 0.3_wp, 14), error)
+      if (allocated(error)) return
+      call new_rng(rng, 7_i8, 0_i8)
+      box = [6.0_wp, 5.0_wp, 4.0_wp]
+      do iper = 1, 2
+         periodic = iper == 1
+         call new_void_grid(fast, box, periodic, 0.2_wp, 200000)
+         call new_void_grid(slow, box, periodic, 0.2_wp, 200000)
+         call check(error, 0.5_wp * norm2(fast%h) < 0.2_wp, "the offset test is used (cells finer than r_in)")
+         if (allocated(error)) return
+         do i = 1, 12
+            x = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+            rr = random_rotation(rng)
+            sc = 0.5_wp + rng%uniform()
+            call fast%block_particle(body%shape, x, rr, sc, sc * body%r_min, sc * body%r_max, body=body)
+            call slow%block_particle(body%shape, x, rr, sc, sc * body%r_min, sc * body%r_max)
+         end do
+         nb = count(slow%blocked)
+         call check(error, nb > size(slow%blocked) / 20, "a good part of the grid is blocked")
+         if (allocated(error)) return
+         call check(error, count(fast%blocked .neqv. slow%blocked), 0, "cells blocked differently")
+         if (allocated(error)) return
+         call check(error, fast%stale, slow%stale, "stale counts")
+         if (allocated(error)) return
+      end do
+   end subroutine test_void_bounds
 end module test_packing

@@ -831,6 +831,7 @@ contains
                nwork = nwork + 1
                work(nwork) = list(n)
             else
+               ! list overflow (was an out-of-bounds write): stage 4b decides
                status = sep_unsure
                return
             end if

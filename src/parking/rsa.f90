@@ -31,8 +31,13 @@ module anm_parking_rsa
 
    !> Void placement: the void grid advances (blocks the particles parked since its last advance,
    !> compacts when a quarter of its free list is stale) only after every `void_epoch` particles
-   !> (streams) of a sieve, and batches end at these boundaries. Every attempt of an epoch thus
-   !> draws its centre from the same grid, whatever the batch sizes and the number of threads.
+   !> (streams) of a sieve. Every attempt of an epoch thus draws its centre from the same grid,
+   !> whatever the batch sizes and the number of threads. A batch may cross epoch boundaries when
+   !> the last advance left the grid unchanged (fine grains among coarse particles block no cell):
+   !> its phase 1 drew from the grid as it stands, so it stays exact while each boundary crossed
+   !> leaves the grid unchanged; at the first boundary that changes it, phase 2 stops and the rest
+   !> of the batch is speculated again (the next batch restarts their streams). Otherwise batches
+   !> end at the boundaries.
    integer, parameter :: void_epoch = 64
 
    !> What the strategy needs of the run besides the per-sieve attempt parameters.
@@ -87,6 +92,9 @@ module anm_parking_rsa
       real(wp) :: target = 0.0_wp, target_fraction = 0.0_wp
       integer(i8) :: attempts = 0
       logical :: done = .false.
+      !> Void placement: particles blocked in the grid so far; the last advance changed no cell.
+      integer :: np_blocked = 0
+      logical :: grid_quiet = .false.
       type(sieve_result_type) :: res
    end type sieve_state_type
 
@@ -137,7 +145,8 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(void_grid_type) :: vg
       type(batch_type) :: bt
-      integer :: k, j, batch_now, np_blocked
+      integer :: k, batch_now, nstream0
+      logical :: changed
       integer(i8) :: tp1, t1
       real(wp) :: r_in, seconds
       r_in = 0.0_wp
@@ -146,15 +155,17 @@ contains
          if (allocated(error)) return
       end if
       if (rp%void) call start_void(vg, pk, ap, r_in)
-      np_blocked = pk%np
+      st%np_blocked = pk%np
       do while (st%res%vol < st%target .and. .not. st%done)
          if (rp%lazy) then
             call build_ahead(pk, ks, ap, rp, st, run%batch, error)
             if (allocated(error)) return
          end if
          batch_now = run%batch
-         ! void placement: a batch never crosses an epoch boundary (see void_epoch)
-         if (rp%void) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
+         ! void placement: a batch crosses an epoch boundary only while the grid is quiet (see
+         ! void_epoch)
+         if (rp%void .and. .not. st%grid_quiet) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
+         nstream0 = st%nstream
          call system_clock(tp1)
          call bt%speculate(batch_now, ap, pk, vg, st%nstream, rp%dist)
          call system_clock(t1)
@@ -162,13 +173,17 @@ contains
          ! every process sizes the next batch alike
          if (allocated(rp%dist)) seconds = rp%dist%agree(seconds)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
-         if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
-            do j = np_blocked + 1, pk%np
-               call block_particle(vg, pk, j)
-            end do
-            np_blocked = pk%np
-            if (vg%stale > vg%nfree / 4) call vg%compact()
+         if (rp%void .and. mod(st%nstream, void_epoch) == 0 .and. pk%np > st%np_blocked) then
+            call advance_void(vg, pk, st, changed)
+         else if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
+            ! a batch stopped at a boundary it has already advanced (settle_batch), or an epoch
+            ! that parked nothing: the same grid
             if (vg%nfree == 0) st%done = .true.
+         end if
+         ! a batch cut short by a changed grid is sized by the part that was settled
+         if (st%nstream - nstream0 < batch_now) then
+            seconds = seconds * max(1, st%nstream - nstream0) / batch_now
+            batch_now = max(1, st%nstream - nstream0)
          end if
          run%batch = min(rp%batch_limit, next_batch(batch_now, seconds, st%target - st%res%vol, &
                                                     st%res%vol, st%res%count, rp%nthreads))
@@ -178,20 +193,45 @@ contains
       call sieve_report(rp, st, run, vg, r_in)
    end subroutine park_sieve
 
-   !> Phase 2 of a batch: settle its particles in order and park them until the sieve ends.
+   !> Void placement: block the particles parked since the last advance, compact the free list
+   !> when a quarter of it is stale; `changed` when a cell was blocked (the draws change).
+   subroutine advance_void(vg, pk, st, changed)
+      type(void_grid_type), intent(inout) :: vg
+      type(packing_type), intent(in) :: pk
+      type(sieve_state_type), intent(inout) :: st
+      logical, intent(out) :: changed
+      integer :: j, stale0
+      stale0 = vg%stale
+      do j = st%np_blocked + 1, pk%np
+         call block_particle(vg, pk, j)
+      end do
+      st%np_blocked = pk%np
+      changed = vg%stale /= stale0
+      if (vg%stale > vg%nfree / 4) call vg%compact()
+      if (vg%nfree == 0) st%done = .true.
+      st%grid_quiet = .not. changed
+   end subroutine advance_void
+
+   !> Phase 2 of a batch: settle its particles in order and park them until the sieve ends. With
+   !> void placement, the grid advances at each epoch boundary inside the batch; when that changes
+   !> it, the rest of the batch (speculated on the old grid) is left for the next batch.
    subroutine settle_batch(bt, pk, ap, rp, vg, st, run)
       type(batch_type), intent(inout) :: bt
       type(packing_type), intent(inout) :: pk
       type(attempt_params_type), intent(in) :: ap
       type(rsa_params_type), intent(in) :: rp
-      type(void_grid_type), intent(in) :: vg
+      type(void_grid_type), intent(inout) :: vg
       type(sieve_state_type), intent(inout) :: st
       type(run_state_type), intent(inout) :: run
       type(fit_scratch_type) :: scratch
       integer :: b, k
       real(wp) :: sc, vol, vol_with
-      logical :: keep
+      logical :: keep, changed
       do b = 1, bt%n
+         if (rp%void .and. b > 1 .and. mod(st%nstream, void_epoch) == 0) then
+            call advance_void(vg, pk, st, changed)
+            if (changed .or. st%done) exit
+         end if
          st%nstream = st%nstream + 1
          call bt%settle(b, ap, pk, vg, scratch)
          associate (a => bt%at(b))
@@ -285,7 +325,7 @@ contains
       integer, intent(in) :: j
       associate (kj => pk%kinds(pk%kind_of(j)))
          call vg%block_particle(kj%body%shape, pk%center(:, j), pk%rot(:, :, j), pk%scale(j), pk%scale(j) * kj%body%r_min, &
-                                pk%rho(j))
+                                pk%rho(j), body=kj%body)
       end associate
    end subroutine block_particle
 

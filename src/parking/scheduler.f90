@@ -272,6 +272,8 @@ contains
       logical, intent(out) :: alone(:)
       integer, allocatable :: cell(:, :), first(:), item(:), key(:)
       integer :: n, nc(3), nbucket, i, d
+      ! fewer spheres than this are searched by the calling thread alone
+      integer, parameter :: parallel_min = 8192
       real(wp) :: h(3)
       n = size(r)
       alone = .true.
@@ -300,6 +302,14 @@ contains
          item(first(key(i))) = i
       end do
       ! first(k) now ends bucket k: bucket k is item(first(k - 1) + 1 : first(k)), bucket 1 from 1
+      if (n < parallel_min) then
+         ! a batch of fine grains (void placement caps batches at 64): a parallel region would cost
+         ! more than the search, and on a loaded machine its barrier spins (docs/performance-notes.md)
+         do i = 2, n
+            alone(i) = nothing_near(i, x, r, box, periodic, nc, nbucket, cell, first, item)
+         end do
+         return
+      end if
       !$omp parallel do default(none) shared(n, x, r, box, periodic, nc, nbucket, cell, first, item, alone) &
       !$omp& private(i) schedule(static)
       do i = 2, n

@@ -21,12 +21,16 @@
 !>     call vg%compact()                    ! rebuild the list of free cells (serial)
 !>     x = vg%draw(u1, u2, u3, u4)          ! a uniform point of a uniformly drawn free cell
 module anm_parking_void_grid
-   use anm_core_kinds, only: wp, i8
+   use anm_core_kinds, only: wp, i8, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type
+   use anm_contact_body, only: contact_body_type, stored_level, patch_rows, patch_cols, patch_bounds
    implicit none
    private
 
    public :: void_grid_type, new_void_grid
+
+   !> Answers of `bound_decision`.
+   integer, parameter :: undecided = 0, decided_in = 1, decided_out = 2
 
    !> The occupancy grid.
    type :: void_grid_type
@@ -108,8 +112,10 @@ contains
    end subroutine new_void_grid
 
    !> Mark the cells made invalid by a parked particle (shape in its body frame, pose, inscribed and
-   !> bounding radii in mm).
-   pure subroutine block_particle(self, shape, center, rot, scale, rho_in, rho_out)
+   !> bounding radii in mm). With `body` (the contact body of the same expansion), a cell is first
+   !> decided by the body's certified bounds of r over the stored patch holding its direction; only
+   !> cells whose offset surface passes within those bounds evaluate r (the same cells are blocked).
+   pure subroutine block_particle(self, shape, center, rot, scale, rho_in, rho_out, body)
       !> Grid.
       class(void_grid_type), intent(inout) :: self
       !> Particle surface (body frame, shape units).
@@ -118,13 +124,19 @@ contains
       real(wp), intent(in) :: center(3), rot(3, 3), scale
       !> Certified inscribed and bounding radii of the particle (mm).
       real(wp), intent(in) :: rho_in, rho_out
-      real(wp) :: hd, m, reach, x(3), d(3), y(3), ly, ball
-      integer :: lo(3), hi(3), i1, i2, i3, c(3), cell
+      !> Contact body of `shape` (its stored bounds decide most cells without evaluating r).
+      type(contact_body_type), intent(in), optional :: body
+      real(wp) :: hd, m, reach, x(3), d(3), y(3), ly, ball, off
+      integer :: lo(3), hi(3), i1, i2, i3, c(3), cell, code
+      logical :: bounds
       hd = 0.5_wp * norm2(self%h)
       m = self%r_in - hd
       ball = rho_in + self%r_in - hd
       if (m <= 0.0_wp .and. ball <= 0.0_wp) return
       reach = rho_out + max(m, 0.0_wp)
+      off = m / scale
+      bounds = .false.
+      if (present(body)) bounds = allocated(body%dlo)
       lo = floor((center - reach) / self%h)
       hi = floor((center + reach) / self%h)
       if (.not. self%periodic) then
@@ -151,7 +163,18 @@ contains
                if (ly == 0.0_wp) then
                   self%blocked(cell) = .true.
                   self%stale = self%stale + 1
-               else if (ly <= shape%radius_dir(y / ly) + m / scale) then
+                  cycle
+               end if
+               if (bounds) then
+                  code = bound_decision(body, y / ly, ly - off)
+                  if (code == decided_out) cycle
+                  if (code == decided_in) then
+                     self%blocked(cell) = .true.
+                     self%stale = self%stale + 1
+                     cycle
+                  end if
+               end if
+               if (ly <= shape%radius_dir(y / ly) + m / scale) then
                   self%blocked(cell) = .true.
                   self%stale = self%stale + 1
                end if
@@ -159,6 +182,36 @@ contains
          end do
       end do
    end subroutine block_particle
+
+   !> Whether the certified bounds of r over the stored patch holding the unit direction u decide
+   !> the test t <= r(u): `decided_in` (r(u) >= t for sure), `decided_out` (r(u) < t for sure) or
+   !> `undecided` (also near a patch edge, where rounding could pick the neighbouring patch). The
+   !> margin (1e-9 of r_max) covers the rounding of r(u) as `radius_dir` evaluates it.
+   pure integer function bound_decision(body, u, t) result(code)
+      type(contact_body_type), intent(in) :: body
+      real(wp), intent(in) :: u(3), t
+      real(wp), parameter :: edge = 1.0e-9_wp
+      real(wp) :: th, ph, ft, fp, rlo, rhi, margin
+      integer :: i, j
+      code = undecided
+      th = atan2(sqrt(u(1)**2 + u(2)**2), u(3)) / pi * patch_rows(stored_level)
+      ph = atan2(u(2), u(1))
+      if (ph < 0.0_wp) ph = ph + two_pi
+      ph = ph / two_pi * patch_cols(stored_level)
+      ft = th - aint(th)
+      fp = ph - aint(ph)
+      if (ft < edge .or. ft > 1.0_wp - edge .or. fp < edge .or. fp > 1.0_wp - edge) return
+      i = int(th) + 1
+      j = int(ph) + 1
+      if (i < 1 .or. i > patch_rows(stored_level) .or. j < 1 .or. j > patch_cols(stored_level)) return
+      call patch_bounds(body, stored_level, i, j, rlo, rhi)
+      margin = 1.0e-9_wp * body%r_max
+      if (t <= rlo - margin) then
+         code = decided_in
+      else if (t > rhi + margin) then
+         code = decided_out
+      end if
+   end function bound_decision
 
    !> Rebuild the list of free cells (in cell order, so that draws are reproducible).
    pure subroutine compact(self)
