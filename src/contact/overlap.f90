@@ -827,9 +827,13 @@ contains
                   status = sep_unsure
                   return
                end if
-            else
+            else if (nwork < max_list) then
                nwork = nwork + 1
                work(nwork) = list(n)
+            else
+               ! more B leaves than the list holds: undecided here, as when split_b overflows
+               status = sep_unsure
+               return
             end if
          end do
          nlist = nwork

@@ -204,16 +204,27 @@ contains
       end associate
    end subroutine insert
 
+   !> A block pool of n (>= nblock) blocks.
+   pure subroutine resize_pool(self, n)
+      type(cell_list_type), intent(inout) :: self
+      integer, intent(in) :: n
+      type(cell_block_type), allocatable :: tmp(:)
+      allocate (tmp(n))
+      tmp(:self%nblock) = self%blocks(:self%nblock)
+      call move_alloc(tmp, self%blocks)
+   end subroutine resize_pool
+
    !> A new empty block whose chain continues with block `next`.
    pure subroutine new_block(self, next, nb)
       type(cell_list_type), intent(inout) :: self
       integer, intent(in) :: next
       integer, intent(out) :: nb
-      type(cell_block_type), allocatable :: tmp(:)
+      integer :: m
       if (self%nblock == size(self%blocks)) then
-         allocate (tmp(2 * size(self%blocks)))
-         tmp(:self%nblock) = self%blocks(:self%nblock)
-         call move_alloc(tmp, self%blocks)
+         ! double; by a quarter beyond 2^20 blocks (128 MB), where the unused part of a doubling
+         ! and the copy (old and new pool together) limit a run of 10^7 particles
+         m = size(self%blocks)
+         call resize_pool(self, merge(2 * m, m + m / 4, m < 2**20))
       end if
       self%nblock = self%nblock + 1
       nb = self%nblock
