@@ -139,13 +139,13 @@ contains
          rho(p) = samp(key(p))%rmax * model%scale(p)
       end do
       ! the centres wrapped into the box, shared by the threads; the cell list's block pool sized
-      ! for the particles at once (half a block per particle, grown from there when needed)
+      ! for the particles at once (a block per particle at most; blocks not used cost no memory)
       allocate (cw(3, model%np))
       do p = 1, model%np
          cw(:, p) = wrap(model, model%center(:, p))
       end do
       call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp), &
-                         capacity=model%np)
+                         capacity=2 * model%np)
       do p = 1, model%np
          call cl%insert(p, cw(:, p), rho(p))
       end do

@@ -42,21 +42,23 @@ module anm_neighbours_cell_list
    !> Records per block.
    integer, parameter :: block_size = 3
 
-   !> What a query reads of a stored particle (40 bytes).
+   !> What a query reads of a stored particle (40 bytes). No default values (nor in the block): a
+   !> pool allocated ahead is then not written, and costs memory only as blocks are used.
    type :: cell_record_type
       !> Centre.
-      real(wp) :: x(3) = 0.0_wp
+      real(wp) :: x(3)
       !> Bounding radius (rounded up) and certain-overlap radius (rounded down).
-      real(sp) :: rho = 0.0_sp, rin = 0.0_sp
+      real(sp) :: rho, rin
       !> Particle id.
-      integer :: id = 0
+      integer :: id
    end type cell_record_type
 
    !> Up to block_size records of one cell and the next block of the cell (128 bytes: the count
-   !> and the first record share the first 48 bytes).
+   !> and the first record share the first 48 bytes). `new_block` sets n and next; `insert` writes
+   !> records 1..n.
    type :: cell_block_type
-      integer :: n = 0
-      integer :: next = 0
+      integer :: n
+      integer :: next
       type(cell_record_type) :: r(block_size)
    end type cell_block_type
 
@@ -84,6 +86,8 @@ module anm_neighbours_cell_list
    contains
       !> Insert particle i.
       procedure :: insert
+      !> Room for a number of blocks without growing.
+      procedure :: reserve
       !> Particles whose bounding spheres (caller's arrays) intersect a query sphere.
       procedure :: query
       !> Candidates from the stored records, or the first certain overlap.
@@ -203,6 +207,18 @@ contains
          lv%count = lv%count + 1
       end associate
    end subroutine insert
+
+   !> Make room for n blocks (nothing changes when there is room already). Blocks of the pool
+   !> are not written before use, so room reserved ahead costs address space, not memory: a caller
+   !> that knows about how many records will come (a block holds at least one) avoids the copies
+   !> of a growing pool, which hold the old and the new pool at once.
+   pure subroutine reserve(self, n)
+      !> Cell list.
+      class(cell_list_type), intent(inout) :: self
+      !> Blocks.
+      integer, intent(in) :: n
+      if (n > size(self%blocks)) call resize_pool(self, n)
+   end subroutine reserve
 
    !> A block pool of n (>= nblock) blocks.
    pure subroutine resize_pool(self, n)

@@ -208,8 +208,8 @@ contains
       end do
    end subroutine compact
 
-   !> Make room for n particles and as many cell-list records (nothing changes when there is
-   !> room already; else room for 1/32 more, so that a slowly rising estimate does not copy the
+   !> Make room for n particles and as many cell-list records and blocks (nothing changes when
+   !> there is room already; else room for 1/32 more, so that a slowly rising estimate does not copy the
    !> arrays each time): a caller that knows about how many particles will come saves the
    !> copies and the unused part of the growth by doubling.
    subroutine reserve(self, n)
@@ -226,6 +226,9 @@ contains
          o2(:self%nrecord) = self%owner(:self%nrecord)
          call move_alloc(o2, self%owner)
       end if
+      ! a block per record at most: the pool never grows (nor copies) before n records; unused
+      ! blocks are never written, so they cost no memory
+      if (n > size(self%cl%blocks)) call self%cl%reserve(m)
    end subroutine reserve
 
    !> Free the cell list: no more `add`, `move`, `compact`, `neighbours` nor `fits` (the particle
