@@ -11,13 +11,16 @@ Usage (from the repository root; `bash scripts/benchmarks.sh` installs and build
     python3 bench/run_all.py [--out docs/performance.md] [--skip NAME ...] [--only NAME ...]
 
 NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing, verify,
-shellsmm, finesieves (verify: `anm verify` of M_sand against its parking; shellsmm:
+shellsmm, finesieves, ten_million (verify: `anm verify` of M_sand against its parking; shellsmm:
 `inputs/shells_mm.nml`, its first sieve alone (start-up) without and with a warm kind cache, the
 whole job with shells (no cache, warm cache) and without shells, the kinds' memory; finesieves:
 `inputs/concrete.nml` with `strategy = 'rsa'`, attempts per second (wall and CPU) of each sieve,
 the three finest being the dense-regime figure; `--concrete-box L` runs it in an L mm box instead
 of 40 mm for a quicker look; all beside the reference loop's time in the same run). Every job runs
 with ANM_CACHE=off unless it tests the cache.
+ten_million: `inputs/ten_million.nml`, 10^7 sand grains, parking and `anm verify` with CPU time,
+wall time and peak memory of each, about 10 minutes on 2 quiet cores and 1.2 GB of disk for the
+model, beside the reference loop's time in the same run.
 Jobs that need ../shared/shapes (msand, table23, million with real shapes, slicing of M_sand)
 are reported as "not run" when the folder is missing.
 """
@@ -43,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 SHAPES = SHARED / "shapes"
 ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing", "verify", "shellsmm",
-       "finesieves")
+       "finesieves", "ten_million")
 
 
 @dataclass
@@ -365,6 +368,39 @@ def verify_section(rep: Report, anm: str, tmp: Path) -> None:
                               + v.stdout.strip() + "\n" + ref_text + "\n" + ref2))
 
 
+def ten_million_section(rep: Report, anm: str, tmp: Path) -> None:
+    """inputs/ten_million.nml (10^7 sand grains): parking, then `anm verify` of the model, each with
+    CPU time, wall time and peak memory, between two runs of the reference loop."""
+    nml = ROOT / "inputs/ten_million.nml"
+    title = "10^7 sand grains (`inputs/ten_million.nml`)"
+    if not SHAPES.is_dir() or not nml.exists():
+        rep.sections.append(f"### {title}\n\nnot run: ../shared/shapes or the namelist missing\n")
+        return
+    ref_text, _ = reference_loop(tmp)
+    job = park(anm, nml, tmp, "ten_million", 2, verify=False)
+    v = sh(f"{shlex.quote(anm)} verify {shlex.quote(str(job.model))}", env={"OMP_NUM_THREADS": "2"}) \
+        if job.model else None
+    if job.model:
+        job.model.unlink(missing_ok=True)   # 1.2 GB
+    ref2, _ = reference_loop(tmp)
+    r = job.run
+    if v is None:
+        rep.sections.append(f"### {title}\n\nparking failed (exit {r.rc})\n{r.stderr[-1500:]}\n")
+        return
+    rep.target("10^7 particles (order 5), 2 threads: parking", f"{job.particles:,} particles in {r.wall:.0f} s "
+               f"({r.cpu:.0f} s CPU), {r.peak_mb / 1024:.2f} GB peak", "<= 3 min, <= 6 GB",
+               job.particles >= 9_500_000 and r.wall <= 180 and r.peak_mb <= 6144)
+    rep.target("10^7 particles: `anm verify`", f"{'passed' if v.rc == 0 else 'FAILED'} in {v.wall:.0f} s "
+               f"({v.cpu:.0f} s CPU), {v.peak_mb / 1024:.2f} GB peak", "passes", v.rc == 0)
+    per = f"{1048576 * r.peak_mb / job.particles:.0f}" if job.particles else "-"
+    rep.sections.append(block(title, "OMP_NUM_THREADS=2 anm run inputs/ten_million.nml; "
+                              "OMP_NUM_THREADS=2 anm verify out/ten_million/model.h5",
+                              f"parking: {r.wall:.2f} s wall, {r.cpu:.2f} s CPU, {r.peak_mb:.0f} MB peak "
+                              f"({per} bytes per particle), {job.particles:,} particles, exit {r.rc}\n"
+                              f"verify:  {v.wall:.2f} s wall, {v.cpu:.2f} s CPU, {v.peak_mb:.0f} MB peak, "
+                              f"exit {v.rc}\n" + v.stdout.strip() + "\n" + ref_text + "\n" + ref2))
+
+
 def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
     """inputs/shells_mm.nml: the first sieve alone (start-up) without and with a warm kind cache,
     then the job with shells (cache off, then warm) and without shells; the kinds' memory."""
@@ -606,6 +642,9 @@ def main() -> int:
         if "finesieves" in which:
             print("== finesieves", file=sys.stderr)
             finesieves_section(rep, args.anm, tmp, args.concrete_box)
+        if "ten_million" in which:
+            print("== ten_million", file=sys.stderr)
+            ten_million_section(rep, args.anm, tmp)
         if "slicing" in which:
             model = ROOT / "out/msand/model.h5"
             if SHAPES.is_dir():

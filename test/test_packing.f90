@@ -1,6 +1,7 @@
 !> Tests of the packing type: add, remove and move keep the neighbour query and the overlap test of
 !> a candidate pose equal to brute force (spheres, whose overlap is known exactly), in periodic
-!> and walled boxes; a mark limits the test to the particles placed after it.
+!> and walled boxes; a mark limits the test to the particles placed after it; reserving room and
+!> growing past it keep every particle.
 module test_packing
    use anm_core_kinds, only: wp, i8
    use anm_core_error, only: error_type
@@ -32,7 +33,8 @@ contains
               new_unittest("add/remove/move: fits = sphere overlap and walls", test_fits_walls), &
               new_unittest("compact keeps the particles and the answers", test_compact), &
               new_unittest("fits since a mark tests only later particles", test_since), &
-              new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds)]
+              new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds), &
+              new_unittest("reserve and growth keep the particles and the answers", test_reserve)]
    end subroutine collect_packing
 
    !> A packing of unit-sphere kinds (kind 1) with periodic or walled box.
@@ -272,4 +274,45 @@ contains
          if (allocated(error)) return
       end do
    end subroutine test_void_bounds
+
+   !> Room reserved after 3,000 particles (beyond the initial 4,096), the arrays grown past it, the
+   !> record list too: every particle keeps its pose and the neighbour query still equals brute force.
+   subroutine test_reserve(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(packing_type) :: pk
+      type(rng_type) :: rng
+      integer, parameter :: n = 9000
+      real(wp) :: x(3, n), r(3, 3, n), sc(n), q(3), rq
+      integer, allocatable :: ids(:)
+      real(wp), allocatable :: shifts(:, :)
+      integer :: i, k, m, j, nbrute
+      call sphere_packing(pk, .true., [40.0_wp, 40.0_wp, 40.0_wp], error)
+      if (allocated(error)) return
+      call new_rng(rng, 5_i8, 0_i8)
+      do i = 1, n
+         if (i == 3001) call pk%reserve(5000)
+         x(:, i) = [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box
+         r(:, :, i) = random_rotation(rng)
+         sc(i) = 0.1_wp * 10.0_wp**rng%uniform()
+         call pk%add(1, x(:, i), r(:, :, i), sc(i), 1)
+      end do
+      call check(error, size(pk%scale) >= n .and. size(pk%owner) >= n, "capacity for every particle")
+      if (allocated(error)) return
+      call check(error, all(pk%center(:, :n) == x) .and. all(pk%rot(:, :, :n) == r) .and. all(pk%scale(:n) == sc), &
+                 "poses kept through reserve and growth")
+      if (allocated(error)) return
+      do k = 1, 100
+         q = [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box
+         rq = 0.1_wp * 10.0_wp**rng%uniform()
+         call pk%neighbours(q, rq, ids, shifts, m)
+         nbrute = 0
+         do j = 1, pk%np
+            if (distance(pk, pk%center(:, j), q) < rq + pk%rho(j)) nbrute = nbrute + 1
+         end do
+         call check(error, m, nbrute, "neighbours vs brute force after growth")
+         if (allocated(error)) return
+      end do
+      call pk%release()
+      call check(error, .not. allocated(pk%cl%blocks) .and. allocated(pk%center), "release frees the cell list only")
+   end subroutine test_reserve
 end module test_packing

@@ -134,7 +134,7 @@ contains
       logical, allocatable :: has_body(:)
       type(contact_params_type) :: cparams
       integer, allocatable :: key(:), kshape(:), korder(:)
-      real(wp), allocatable :: rho(:)
+      real(wp), allocatable :: rho(:), cw(:, :)
       type(cell_list_type) :: cl
       integer :: p, k, nkey
       integer(i8) :: npairs, nover, ncleared
@@ -174,14 +174,21 @@ contains
       do p = 1, model%np
          rho(p) = samp(key(p))%rmax * model%scale(p)
       end do
-      call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp))
+      ! the centres wrapped into the box, shared by the threads; the cell list's block pool sized
+      ! for the particles at once (a block per particle at most; blocks not used cost no memory)
+      allocate (cw(3, model%np))
       do p = 1, model%np
-         call cl%insert(p, wrap(model, model%center(:, p)), rho(p))
+         cw(:, p) = wrap(model, model%center(:, p))
+      end do
+      call new_cell_list(cl, model%box, model%periodic, max(minval(rho, mask=rho > 0), 1.0e-6_wp), &
+                         capacity=2 * model%np)
+      do p = 1, model%np
+         call cl%insert(p, cw(:, p), rho(p))
       end do
       ! which (shape, order) pairs get a contact body for the filter
       allocate (ends(nkey), has_body(nkey))
       ends = 0
-      if (filtered .and. .not. present(filter)) call count_ends(model, key, rho, cl, ends)
+      if (filtered .and. .not. present(filter)) call count_ends(model, key, rho, cl, cw, ends)
       if (present(filter)) ends = merge(min_filter_ends, 0, filtered)
       call build_bodies(model, samp, ends, bodies, has_body)
       npairs = 0
@@ -190,20 +197,15 @@ contains
       depth_max = 0.0_wp
       worst_depth = 0.0_wp
       nwall = 0
-      !$omp parallel default(none) shared(model, samp, key, rho, cl, report, worst_depth, pruned, bodies, has_body, &
-      !$omp& cparams, rank, nranks) private(p) reduction(+:npairs, nover, nwall, ncleared) reduction(max:depth_max)
+      !$omp parallel default(none) shared(model, samp, key, rho, cl, cw, report, worst_depth, pruned, bodies, &
+      !$omp& has_body, cparams, rank, nranks) private(p) reduction(+:npairs, nover, nwall, ncleared) reduction(max:depth_max)
       block
          integer, allocatable :: cand(:)
          real(wp), allocatable :: shift(:, :)
-         real(wp), allocatable :: cw(:, :)
          integer :: ncand, i, q
          real(wp) :: d, dw, pair_max
          logical :: hit
          pair_max = 0.0_wp
-         allocate (cw(3, model%np))
-         do i = 1, model%np
-            cw(:, i) = wrap(model, model%center(:, i))
-         end do
          !$omp do schedule(dynamic, 16)
          do p = 1, model%np
             if (owner_slab(cw(1, p), model%box(1), nranks) /= rank) cycle   ! this process' slab
@@ -300,27 +302,27 @@ contains
 
    !> Per (shape, order): the number of pair ends (pairs whose bounding spheres intersect, each
    !> counted for both particles' (shape, order)).
-   subroutine count_ends(model, key, rho, cl, ends)
+   subroutine count_ends(model, key, rho, cl, cw, ends)
       type(model_type), intent(in) :: model
       integer, intent(in) :: key(:)
       real(wp), intent(in) :: rho(:)
       type(cell_list_type), intent(in) :: cl
+      !> Centres wrapped into the box.
+      real(wp), intent(in) :: cw(:, :)
       integer, intent(inout) :: ends(:)
       integer :: p
-      !$omp parallel default(none) shared(model, key, rho, cl) private(p) reduction(+:ends)
+      !$omp parallel default(none) shared(model, key, rho, cl, cw) private(p) reduction(+:ends)
       block
          integer, allocatable :: cand(:)
          real(wp), allocatable :: shift(:, :)
          integer :: ncand, i, q
-         real(wp) :: cp(3)
          logical :: hit
          !$omp do schedule(dynamic, 64)
          do p = 1, model%np
-            cp = wrap(model, model%center(:, p))
-            call cl%neighbours(cp, rho(p), cand, shift, ncand, hit, jmax=p)
+            call cl%neighbours(cw(:, p), rho(p), cand, shift, ncand, hit, jmax=p)
             do i = 1, ncand
                q = cand(i)
-               if (sum((wrap(model, model%center(:, q)) + shift(:, i) - cp)**2) >= (rho(p) + rho(q))**2) cycle
+               if (sum((cw(:, q) + shift(:, i) - cw(:, p))**2) >= (rho(p) + rho(q))**2) cycle
                if (q == p) cycle
                ends(key(p)) = ends(key(p)) + 1
                ends(key(q)) = ends(key(q)) + 1
@@ -476,9 +478,10 @@ contains
    end function wall_depth
 
    !> Memory (bytes) verify_model needs at `resolution`: per distinct (shape, order) pair the
-   !> 2 resolution**2 sampled surface points and their block bounds, plus per particle its key,
-   !> bounding radius, cell-list entry and wrapped centre; with the certified filter (default) also
-   !> one contact body (about 4.5 MB) per pair.
+   !> 2 resolution**2 sampled surface points and their block bounds, plus per particle the model
+   !> (about 120 bytes), its key, bounding radius, wrapped centre and cell-list record, and the
+   !> read's temporary rotation (about 320 bytes in all, rounded up); with the certified
+   !> filter (default) also one contact body (about 4.5 MB) per pair.
    function verify_memory(model, resolution, filter) result(bytes)
       !> Model (validated).
       type(model_type), intent(in) :: model
@@ -498,7 +501,7 @@ contains
       end do
       nkey = count(seen)
       bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (24.0_wp + 40.0_wp / block**2) &
-              + real(model%np, wp) * 200.0_wp
+              + real(model%np, wp) * 320.0_wp
       if (.not. present(filter)) then
          bytes = bytes + real(nkey, wp) * 5.0e6_wp
       else if (filter) then

@@ -105,6 +105,8 @@ module anm_config_parking
 contains
 
    !> Read and validate `&parking` (optional: defaults).
+   !> Length: about 150 lines: one namelist read, one check per variable (each naming its line), and the
+   !> enumerated keywords resolved; splitting it would spread the group over several procedures.
    subroutine load_parking_config(self, nml, error)
       !> The parking.
       type(parking_config_type), intent(out) :: self

@@ -15,9 +15,12 @@ module anm_core_resources
    public :: available_memory, check_memory, format_bytes, run_memory_estimate, particle_count_estimate, &
       & bytes_per_particle, bytes_per_kind, shape_memory
 
-   !> Parking memory per particle (model arrays, cell list, batch buffers): measured 500 MB peak
-   !> for 10^6 sand grains (docs/performance-notes.md), rounded up.
-   real(wp), parameter :: bytes_per_particle = 600.0_wp
+   !> Parking memory per particle: the packing's arrays (128 bytes: centre, rotation, scale,
+   !> bounding radius, kind, sieve, record ids), at most one 128-byte cell-list block and the
+   !> cell heads; the model takes the packing's arrays, and the output's temporary rotation (72
+   !> bytes) comes after the cell list is freed (docs/performance-notes.md, issue 15: 10^7 sand
+   !> grains), rounded up.
+   real(wp), parameter :: bytes_per_particle = 300.0_wp
    !> Memory of one particle kind (a shape at a sieve: the contact body with its packed boxes and
    !> shells), about 4.5 MB measured at the default n_box, rounded up.
    real(wp), parameter :: bytes_per_kind = 5.0e6_wp

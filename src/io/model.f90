@@ -174,6 +174,9 @@ contains
       end do
       call h5_write(f, "/particles/rotation", rot, error, split=.true.)
       if (allocated(error)) goto 99
+      ! the in-memory file and its copy on closing come on top of the model: free the copy now
+      ! (72 bytes per particle; 0.7 GB at 10^7 particles)
+      deallocate (rot)
       call h5_write(f, "/particles/scale", model%scale(:model%np), error, split=.true.)
       if (allocated(error)) goto 99
       call h5_write(f, "/particles/nmax", model%nmax(:model%np), error, split=.true.)

@@ -42,21 +42,23 @@ module anm_neighbours_cell_list
    !> Records per block.
    integer, parameter :: block_size = 3
 
-   !> What a query reads of a stored particle (40 bytes).
+   !> What a query reads of a stored particle (40 bytes). No default values (nor in the block): a
+   !> pool allocated ahead is then not written, and costs memory only as blocks are used.
    type :: cell_record_type
       !> Centre.
-      real(wp) :: x(3) = 0.0_wp
+      real(wp) :: x(3)
       !> Bounding radius (rounded up) and certain-overlap radius (rounded down).
-      real(sp) :: rho = 0.0_sp, rin = 0.0_sp
+      real(sp) :: rho, rin
       !> Particle id.
-      integer :: id = 0
+      integer :: id
    end type cell_record_type
 
    !> Up to block_size records of one cell and the next block of the cell (128 bytes: the count
-   !> and the first record share the first 48 bytes).
+   !> and the first record share the first 48 bytes). `new_block` sets n and next; `insert` writes
+   !> records 1..n.
    type :: cell_block_type
-      integer :: n = 0
-      integer :: next = 0
+      integer :: n
+      integer :: next
       type(cell_record_type) :: r(block_size)
    end type cell_block_type
 
@@ -84,6 +86,8 @@ module anm_neighbours_cell_list
    contains
       !> Insert particle i.
       procedure :: insert
+      !> Room for a number of blocks without growing.
+      procedure :: reserve
       !> Particles whose bounding spheres (caller's arrays) intersect a query sphere.
       procedure :: query
       !> Candidates from the stored records, or the first certain overlap.
@@ -204,16 +208,39 @@ contains
       end associate
    end subroutine insert
 
+   !> Make room for n blocks (nothing changes when there is room already). Blocks of the pool
+   !> are not written before use, so room reserved ahead costs address space, not memory: a caller
+   !> that knows about how many records will come (a block holds at least one) avoids the copies
+   !> of a growing pool, which hold the old and the new pool at once.
+   pure subroutine reserve(self, n)
+      !> Cell list.
+      class(cell_list_type), intent(inout) :: self
+      !> Blocks.
+      integer, intent(in) :: n
+      if (n > size(self%blocks)) call resize_pool(self, n)
+   end subroutine reserve
+
+   !> A block pool of n (>= nblock) blocks.
+   pure subroutine resize_pool(self, n)
+      type(cell_list_type), intent(inout) :: self
+      integer, intent(in) :: n
+      type(cell_block_type), allocatable :: tmp(:)
+      allocate (tmp(n))
+      tmp(:self%nblock) = self%blocks(:self%nblock)
+      call move_alloc(tmp, self%blocks)
+   end subroutine resize_pool
+
    !> A new empty block whose chain continues with block `next`.
    pure subroutine new_block(self, next, nb)
       type(cell_list_type), intent(inout) :: self
       integer, intent(in) :: next
       integer, intent(out) :: nb
-      type(cell_block_type), allocatable :: tmp(:)
+      integer :: m
       if (self%nblock == size(self%blocks)) then
-         allocate (tmp(2 * size(self%blocks)))
-         tmp(:self%nblock) = self%blocks(:self%nblock)
-         call move_alloc(tmp, self%blocks)
+         ! double; by a quarter beyond 2^20 blocks (128 MB), where the unused part of a doubling
+         ! and the copy (old and new pool together) limit a run of 10^7 particles
+         m = size(self%blocks)
+         call resize_pool(self, merge(2 * m, m + m / 4, m < 2**20))
       end if
       self%nblock = self%nblock + 1
       nb = self%nblock

@@ -103,10 +103,10 @@ contains
          call ks%build(pk%kinds, [(s, s=1, size(pk%kinds))], error)
          if (allocated(error)) return
       end if
-      call fill_model(cfg, pk, result, model)
       model%attempts = run%attempts
       model%wall_time = real(t1 - run%t0, wp) / run%rate
-      kind_of = pk%kind_of(:pk%np)
+      call fill_model(cfg, pk, result, model)
+      call take_int1(pk%kind_of, pk%np, kind_of)
       call move_alloc(pk%kinds, kinds)
    end subroutine run_parking
 
@@ -282,10 +282,12 @@ contains
       p%nthreads = omp_get_max_threads()
    end function dense_params
 
-   !> The model of a packing.
+   !> The model of a packing. The packing's particle arrays move into the model (one at a time,
+   !> trimmed to np) and its cell list is freed: at 10^7 particles no two copies of the particles
+   !> exist at once. The packing keeps its kinds and np only.
    subroutine fill_model(cfg, pk, result, model)
       type(run_config_type), intent(in) :: cfg
-      type(packing_type), intent(in) :: pk
+      type(packing_type), intent(inout) :: pk
       type(sieve_result_type), intent(in) :: result(:)
       type(model_type), intent(inout) :: model
       integer :: k, np, s
@@ -301,10 +303,13 @@ contains
       model%box = cfg%box%length
       model%periodic = cfg%box%periodic
       model%np = np
-      model%center = pk%center(:, :np)
-      model%rotation = pk%rot(:, :, :np)
-      model%scale = pk%scale(:np)
-      model%sieve = pk%sieve(:np)
+      call pk%release()
+      if (allocated(pk%rho)) deallocate (pk%rho)
+      if (allocated(pk%record)) deallocate (pk%record)
+      call take_real2(pk%center, np, model%center)
+      call take_real3(pk%rot, np, model%rotation)
+      call take_real1(pk%scale, np, model%scale)
+      call take_int1(pk%sieve, np, model%sieve)
       allocate (model%shape(np), model%nmax(np), model%shell_thickness(cfg%shells%nlayer, np))
       do k = 1, np
          associate (kd => pk%kinds(pk%kind_of(k)))
@@ -312,7 +317,7 @@ contains
             model%nmax(k) = kd%order
             if (cfg%shells%nlayer > 0) then
                model%shell_thickness(:, k) = thickness_to_mm(cfg%shells%thickness, cfg%shells%unit, kd%length, &
-                                                             pk%scale(k))
+                                                             model%scale(k))
             end if
          end associate
       end do
@@ -323,4 +328,56 @@ contains
       model%resolved = write_config(cfg)
       model%seed = cfg%run%seed
    end subroutine fill_model
+
+   !> a(:, :np) moved into b (a freed): moved whole when it holds np columns, else copied.
+   subroutine take_real2(a, np, b)
+      real(wp), allocatable, intent(inout) :: a(:, :)
+      integer, intent(in) :: np
+      real(wp), allocatable, intent(out) :: b(:, :)
+      if (size(a, 2) == np) then
+         call move_alloc(a, b)
+      else
+         b = a(:, :np)
+         deallocate (a)
+      end if
+   end subroutine take_real2
+
+   !> a(:, :, :np) moved into b (a freed).
+   subroutine take_real3(a, np, b)
+      real(wp), allocatable, intent(inout) :: a(:, :, :)
+      integer, intent(in) :: np
+      real(wp), allocatable, intent(out) :: b(:, :, :)
+      if (size(a, 3) == np) then
+         call move_alloc(a, b)
+      else
+         b = a(:, :, :np)
+         deallocate (a)
+      end if
+   end subroutine take_real3
+
+   !> a(:np) moved into b (a freed).
+   subroutine take_real1(a, np, b)
+      real(wp), allocatable, intent(inout) :: a(:)
+      integer, intent(in) :: np
+      real(wp), allocatable, intent(out) :: b(:)
+      if (size(a) == np) then
+         call move_alloc(a, b)
+      else
+         b = a(:np)
+         deallocate (a)
+      end if
+   end subroutine take_real1
+
+   !> a(:np) moved into b (a freed).
+   subroutine take_int1(a, np, b)
+      integer, allocatable, intent(inout) :: a(:)
+      integer, intent(in) :: np
+      integer, allocatable, intent(out) :: b(:)
+      if (size(a) == np) then
+         call move_alloc(a, b)
+      else
+         b = a(:np)
+         deallocate (a)
+      end if
+   end subroutine take_int1
 end module anm_parking_engine

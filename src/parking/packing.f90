@@ -74,6 +74,10 @@ module anm_parking_packing
       procedure :: move
       !> Rebuild the cell list from the live particles.
       procedure :: compact
+      !> Room for a given number of particles (and cell-list records) without growing.
+      procedure :: reserve
+      !> Free the cell list (the packing then takes no more particles nor queries).
+      procedure :: release
       !> Number of cell-list records so far (for `fits(..., since=)`).
       procedure :: mark
       !> Particles whose bounding spheres meet a sphere.
@@ -84,6 +88,9 @@ module anm_parking_packing
 
    !> Initial capacity (particles).
    integer, parameter :: initial_capacity = 4096
+   !> Capacity beyond which the particle arrays grow by half instead of doubling (the last growth
+   !> then leaves at most a third of the arrays unused).
+   integer, parameter :: gentle_growth = 2**20
 
 contains
 
@@ -133,7 +140,7 @@ contains
       integer, intent(in) :: i
       integer, allocatable :: o2(:)
       if (self%nrecord == size(self%owner)) then
-         allocate (o2(2 * size(self%owner)))
+         allocate (o2(merge(2 * self%nrecord, self%nrecord + self%nrecord / 2, self%nrecord < gentle_growth)))
          o2(:self%nrecord) = self%owner(:self%nrecord)
          call move_alloc(o2, self%owner)
       end if
@@ -200,6 +207,39 @@ contains
          call insert_record(self, i)
       end do
    end subroutine compact
+
+   !> Make room for n particles and as many cell-list records and blocks (nothing changes when
+   !> there is room already; else room for 1/32 more, so that a slowly rising estimate does not copy the
+   !> arrays each time): a caller that knows about how many particles will come saves the
+   !> copies and the unused part of the growth by doubling.
+   subroutine reserve(self, n)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Particles (and records) to hold.
+      integer, intent(in) :: n
+      integer, allocatable :: o2(:)
+      integer :: m
+      m = n + n / 32
+      if (n > size(self%scale)) call resize(self, m)
+      if (n > size(self%owner)) then
+         allocate (o2(m))
+         o2(:self%nrecord) = self%owner(:self%nrecord)
+         call move_alloc(o2, self%owner)
+      end if
+      ! a block per record at most: the pool never grows (nor copies) before n records; unused
+      ! blocks are never written, so they cost no memory
+      if (n > size(self%cl%blocks)) call self%cl%reserve(m)
+   end subroutine reserve
+
+   !> Free the cell list: no more `add`, `move`, `compact`, `neighbours` nor `fits` (the particle
+   !> arrays stay).
+   subroutine release(self)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      type(cell_list_type) :: empty
+      self%cl = empty
+      if (allocated(self%owner)) deallocate (self%owner)
+   end subroutine release
 
    !> Number of cell-list records so far.
    pure integer function mark(self) result(m)
@@ -359,28 +399,43 @@ contains
       end do
    end subroutine likely_first
 
-   !> Double the particle arrays.
+   !> Grow the particle arrays (double them; by half beyond gentle_growth).
    subroutine grow(self)
       type(packing_type), intent(inout) :: self
+      integer :: n
+      n = size(self%scale)
+      call resize(self, merge(2 * n, n + n / 2, n < gentle_growth))
+   end subroutine grow
+
+   !> Particle arrays of capacity n (>= np), one array at a time (the copy costs the largest
+   !> array, not all of them).
+   subroutine resize(self, n)
+      type(packing_type), intent(inout) :: self
+      integer, intent(in) :: n
       real(wp), allocatable :: c2(:, :), r2(:, :, :), s2(:), h2(:)
       integer, allocatable :: i2(:), k2(:), g2(:)
-      integer :: n, np
-      n = 2 * size(self%scale)
+      integer :: np
       np = self%np
-      allocate (c2(3, n), r2(3, 3, n), s2(n), h2(n), i2(n), k2(n), g2(n))
+      allocate (c2(3, n))
       c2(:, :np) = self%center(:, :np)
-      r2(:, :, :np) = self%rot(:, :, :np)
-      s2(:np) = self%scale(:np)
-      h2(:np) = self%rho(:np)
-      i2(:np) = self%sieve(:np)
-      k2(:np) = self%kind_of(:np)
-      g2(:np) = self%record(:np)
       call move_alloc(c2, self%center)
+      allocate (r2(3, 3, n))
+      r2(:, :, :np) = self%rot(:, :, :np)
       call move_alloc(r2, self%rot)
+      allocate (s2(n))
+      s2(:np) = self%scale(:np)
       call move_alloc(s2, self%scale)
+      allocate (h2(n))
+      h2(:np) = self%rho(:np)
       call move_alloc(h2, self%rho)
+      allocate (i2(n))
+      i2(:np) = self%sieve(:np)
       call move_alloc(i2, self%sieve)
+      allocate (k2(n))
+      k2(:np) = self%kind_of(:np)
       call move_alloc(k2, self%kind_of)
+      allocate (g2(n))
+      g2(:np) = self%record(:np)
       call move_alloc(g2, self%record)
-   end subroutine grow
+   end subroutine resize
 end module anm_parking_packing

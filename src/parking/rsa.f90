@@ -173,6 +173,7 @@ contains
          ! every process sizes the next batch alike
          if (allocated(rp%dist)) seconds = rp%dist%agree(seconds)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
+         call reserve_ahead(pk, st)
          if (rp%void .and. mod(st%nstream, void_epoch) == 0 .and. pk%np > st%np_blocked) then
             call advance_void(vg, pk, st, changed)
          else if (rp%void .and. mod(st%nstream, void_epoch) == 0) then
@@ -270,6 +271,20 @@ contains
          end associate
       end do
    end subroutine settle_batch
+
+   !> Room in the packing for the particles the sieve will probably still park (the missing volume
+   !> over the mean particle volume so far, plus 2 %), once the mean is known (1,000 particles):
+   !> 10^7 particles then grow the arrays once to about their final size instead of doubling them
+   !> (which leaves up to half unused and holds old and new arrays together while copying).
+   subroutine reserve_ahead(pk, st)
+      type(packing_type), intent(inout) :: pk
+      type(sieve_state_type), intent(in) :: st
+      integer, parameter :: min_count = 1000
+      real(wp) :: more
+      if (st%res%count < min_count) return
+      more = 1.02_wp * max(0.0_wp, st%target - st%res%vol) / (st%res%vol / st%res%count)
+      call pk%reserve(int(min(real(pk%np, wp) + more + min_count, 0.5_wp * huge(1))))
+   end subroutine reserve_ahead
 
    !> Lazy kinds: build the kinds of the next batch and of the particles the sieve will probably
    !> still need (the missing volume over the mean particle volume: a sphere of the mean width
