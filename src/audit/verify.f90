@@ -111,6 +111,8 @@ contains
 
    !> Audit `model` at `resolution` polar samples; penetrations deeper than `tolerance` mm
    !> (default 1e-4 of the smallest sieve width) count as overlaps.
+   !> Length: about 150 lines: the set-up (samples, cell list, filter bodies) and the one parallel pair
+   !> loop share their arrays; the pieces that stand alone (bodies, ends, walls, slabs) are helpers.
    subroutine verify_model(model, resolution, report, tolerance, prune, filter, split)
       !> Model.
       type(model_type), intent(in) :: model
