@@ -371,43 +371,34 @@ contains
 
    subroutine test_growth_threads(error)
       type(error_type), allocatable, intent(out) :: error
-      type(model_type) :: a, b
-      integer :: nthreads
-      character(len=*), parameter :: text = "&box length = 7, 7, 7 /"//new_line("a")// &
+      call same_model_for_threads("dense_grow", "&box length = 7, 7, 7 /"//new_line("a")// &
          "&sieves nsieve = 2, min_width = 2.0, 1.0, max_width = 2.4, 1.2, fraction = 0.22, 0.22, " &
          //"order = 6, 4 /"//new_line("a")//"&synthetic count = 3 /"//new_line("a")// &
          "&parking max_locations = 200, strategy = 'dense', dense_rounds = 2, dense_sweeps = 2, " &
-         //"dense_grow_scale = 0.6 /"//new_line("a")//"&run seed = 5 /"
-      nthreads = omp_get_max_threads()
-      call omp_set_num_threads(1)
-      call run_nml("dense_grow1.nml", text, a, error)
-      call omp_set_num_threads(2)
-      if (.not. allocated(error)) call run_nml("dense_grow2.nml", text, b, error)
-      call omp_set_num_threads(nthreads)
-      if (allocated(error)) return
-      print '(a,i0,a,i0,a,2f7.4)', "        1 thread: ", a%np, " particles, 2 threads: ", b%np, " particles; fractions ", &
-         a%achieved_fraction
-      call check(error, a%np == b%np, "particle counts differ")
-      if (allocated(error)) return
-      call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. all(a%scale == b%scale) &
-                 .and. all(a%shape == b%shape) .and. all(a%sieve == b%sieve) .and. a%attempts == b%attempts, &
-                 "models differ between 1 and 2 threads")
+         //"dense_grow_scale = 0.6 /"//new_line("a")//"&run seed = 5 /", error)
    end subroutine test_growth_threads
 
    subroutine test_threads(error)
       type(error_type), allocatable, intent(out) :: error
-      type(model_type) :: a, b
-      integer :: nthreads
-      character(len=*), parameter :: text = "&box length = 8, 8, 8 /"//new_line("a")// &
+      call same_model_for_threads("dense_threads", "&box length = 8, 8, 8 /"//new_line("a")// &
          "&sieves nsieve = 2, min_width = 2.0, 1.0, max_width = 2.4, 1.2, fraction = 0.20, 0.20, " &
          //"order = 8, 6 /"//new_line("a")//"&synthetic count = 4 /"//new_line("a")// &
          "&parking max_locations = 300, strategy = 'dense', dense_rounds = 3, dense_sweeps = 3 /"//new_line("a")// &
-         "&run seed = 4 /"
+         "&run seed = 4 /", error)
+   end subroutine test_threads
+
+   !> Run namelist `text` with 1 and with 2 threads (files NAME1.nml, NAME2.nml) and check that the
+   !> two models are equal dataset by dataset.
+   subroutine same_model_for_threads(name, text, error)
+      character(len=*), intent(in) :: name, text
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      integer :: nthreads
       nthreads = omp_get_max_threads()
       call omp_set_num_threads(1)
-      call run_nml("dense_threads1.nml", text, a, error)
+      call run_nml(name//"1.nml", text, a, error)
       call omp_set_num_threads(2)
-      if (.not. allocated(error)) call run_nml("dense_threads2.nml", text, b, error)
+      if (.not. allocated(error)) call run_nml(name//"2.nml", text, b, error)
       call omp_set_num_threads(nthreads)
       if (allocated(error)) return
       print '(a,i0,a,i0,a,2f7.4)', "        1 thread: ", a%np, " particles, 2 threads: ", b%np, " particles; fractions ", &
@@ -417,5 +408,5 @@ contains
       call check(error, all(a%center == b%center) .and. all(a%rotation == b%rotation) .and. all(a%scale == b%scale) &
                  .and. all(a%shape == b%shape) .and. all(a%sieve == b%sieve) .and. a%attempts == b%attempts, &
                  "models differ between 1 and 2 threads")
-   end subroutine test_threads
+   end subroutine same_model_for_threads
 end module test_dense

@@ -28,17 +28,10 @@ import numpy as np
 
 from . import kernels
 from .model import Model
+from .walleffect import _fibonacci
 
 #: Directions of the moment quadrature.
 N_DIRS = 4000
-
-
-def _fibonacci(n: int) -> np.ndarray:
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    phi = k * np.pi * (3 - np.sqrt(5))
-    s = np.sqrt(1 - z * z)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
 
 
 def shape_moments(model: Model, shape: int, order: int, n_dirs: int = N_DIRS) -> tuple[float, np.ndarray, float]:
