@@ -1,17 +1,31 @@
 """docs/studies.md cannot go stale (issue 18): the page is exactly what studies/page.py writes from
 docs/studies/data.json, that file holds every thesis table over ten seeds or more, and the
 cheapest recorded job, run again with this checkout's anm, gives its recorded numbers exactly."""
+import importlib
+import importlib.util
 import json
 import pathlib
 import subprocess
 import sys
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
 
-from studies import jobs as J  # noqa: E402
-from studies import page as P  # noqa: E402
-from studies import run as R  # noqa: E402
+
+def _repository_package(name: str):
+    """The repository's own package ROOT/name (not installed: it is loaded from its folder)."""
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, ROOT / name / "__init__.py",
+                                                      submodule_search_locations=[str(ROOT / name)])
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+_repository_package("studies")
+J = importlib.import_module("studies.jobs")
+P = importlib.import_module("studies.page")
+R = importlib.import_module("studies.run")
 
 DATA = ROOT / "docs" / "studies" / "data.json"
 
