@@ -257,20 +257,12 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(model_type) :: m
       type(verify_report_type) :: rep
-      real(wp) :: gmin, d(3)
-      integer :: i, j
+      real(wp) :: gmin
       call run_nml("dense_spheres.nml", "&box length = 12, 12, 12 /"//new_line("a")// &
                    "&sieves nsieve = 1, min_width = 2, max_width = 2, fraction = 0.45, source = 'sphere', order = 0 /" &
                    //new_line("a")//"&parking max_locations = 5000, strategy = 'dense', dense_rounds = 40 /", m, error)
       if (allocated(error)) return
-      gmin = huge(1.0_wp)
-      do i = 1, m%np
-         do j = i + 1, m%np
-            d = m%center(:, i) - m%center(:, j)
-            d = d - m%box * anint(d / m%box)
-            gmin = min(gmin, norm2(d) - 2.0_wp)
-         end do
-      end do
+      gmin = sphere_gap(m)
       print '(a,f7.4,a,i0,a,es9.2)', "        dense spheres: fraction ", m%achieved_fraction(1), " (", m%count(1), &
          " spheres), smallest gap ", gmin
       call check(error, gmin >= 0.0_wp, "spheres overlap")
@@ -286,8 +278,7 @@ contains
    subroutine test_shell_gap(error)
       type(error_type), allocatable, intent(out) :: error
       type(model_type) :: m
-      real(wp) :: gmin, d(3), t
-      integer :: i, j
+      real(wp) :: gmin, t
       ! spheres of radius 1 with shells of 0.05 of the length (t = 0.1 mm): bodies of radius 1.1
       ! at 0.30 x 1.331 = 0.40 of the box, beyond RSA of the shell bodies
       t = 0.1_wp
@@ -296,14 +287,7 @@ contains
                    //new_line("a")//"&parking max_locations = 5000, strategy = 'dense' /"//new_line("a")// &
                    "&shells nlayer = 1, thickness = 0.05, mode = 'exclude' /", m, error)
       if (allocated(error)) return
-      gmin = huge(1.0_wp)
-      do i = 1, m%np
-         do j = i + 1, m%np
-            d = m%center(:, i) - m%center(:, j)
-            d = d - m%box * anint(d / m%box)
-            gmin = min(gmin, norm2(d) - 2.0_wp)
-         end do
-      end do
+      gmin = sphere_gap(m)
       print '(a,f8.5,a,f6.3,a,f7.4)', "        smallest gap ", gmin, " mm (bound ", 2 * t, "), fraction ", &
          m%achieved_fraction(1)
       call check(error, gmin >= 2.0_wp * t - 1.0e-9_wp, "gap below 2t")
