@@ -6,7 +6,8 @@ and follows the packing fraction of the whole model from them:
 
 - while a sieve is parked by RSA, its `sieve S: placed N, fraction F of T; ...` lines give its
   fraction, and its first `sieve S done: ..., fraction F ...` line the fraction RSA reached;
-- after that only `sieve S: dense round R, N particles, fraction F ...` lines change it (the RSA
+- after that only `sieve S: dense round R, N particles, fraction F ...` and `sieve S: growth ended
+  after N sweeps, M particles short of their size, fraction F` lines change it (the RSA
   passes inside a dense round print their own `placed`/`done` lines for the round's request only,
   which are ignored).
 
@@ -31,6 +32,8 @@ from pathlib import Path
 PLACED = re.compile(r"^sieve (\d+): placed \d+, fraction\s+([0-9.Ee+-]+) of")
 DONE = re.compile(r"^sieve (\d+) done: \d+ particles, fraction\s+([0-9.Ee+-]+)")
 ROUND = re.compile(r"^sieve (\d+): dense round \d+, \d+ particles, fraction\s+([0-9.Ee+-]+)")
+GROWTH = re.compile(r"^sieve (\d+): growth ended after \d+ sweeps, \d+ particles short of their size, "
+                    r"fraction\s+([0-9.Ee+-]+)")
 
 
 class Curve:
@@ -43,12 +46,12 @@ class Curve:
 
     def feed(self, seconds: float, line: str) -> None:
         """Take one progress line printed `seconds` after the start."""
-        for pattern, event in ((ROUND, "dense round"), (DONE, "sieve done"), (PLACED, "placed")):
+        for pattern, event in ((ROUND, "dense round"), (GROWTH, "growth"), (DONE, "sieve done"), (PLACED, "placed")):
             m = pattern.match(line.strip())
             if not m:
                 continue
             sieve, frac = int(m.group(1)), float(m.group(2))
-            if event != "dense round" and sieve in self.rsa_done:
+            if event not in ("dense round", "growth") and sieve in self.rsa_done:
                 return                      # an RSA pass inside a dense round: the round's own request
             if event == "sieve done":
                 self.rsa_done.add(sieve)

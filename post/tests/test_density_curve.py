@@ -1,6 +1,6 @@
 """scripts/density_curve.py follows the model's packing fraction through the progress lines: RSA
 lines of a sieve until its first `done`, then only its dense rounds (the RSA passes inside a round
-print the round's own request, which must not count)."""
+print the round's own request, which must not count) and the lines closing a sieve's growth."""
 import importlib.util
 import pathlib
 
@@ -19,6 +19,8 @@ LOG = """\
 [    12.55] sieve 2: placed 100, fraction  0.05000 of  0.15000; run  80 % of the target volume
 [    12.75] sieve 2 done: 250 particles, fraction  0.10200 (target  0.15000), 999 attempts, 0 particles not parked, 1 s
 [    21.87] sieve 2: dense round 1, 282 particles, fraction  0.14500 ( 0.14765 when grown) of  0.15000, acceptance 0.5
+[    22.10] sieve 2 done: 30 particles, fraction  0.00100 (target  0.00100), 99 attempts, 0 particles not parked, 1 s
+[    30.00] sieve 2: growth ended after 12 sweeps, 3 particles short of their size, fraction  0.14900
 """
 
 
@@ -30,4 +32,5 @@ def test_curve_follows_sieves_and_ignores_round_requests(tmp_path):
     rows = [r.split(",") for r in out.read_text().splitlines()[1:]]
     totals = [(float(t), round(float(f), 5), e) for t, f, _, e in rows]
     assert totals == [(2.06, 0.26808, "placed"), (2.31, 0.31416, "sieve done"), (12.47, 0.35186, "dense round"),
-                      (12.55, 0.40186, "placed"), (12.75, 0.45386, "sieve done"), (21.87, 0.49686, "dense round")]
+                      (12.55, 0.40186, "placed"), (12.75, 0.45386, "sieve done"), (21.87, 0.49686, "dense round"),
+                      (30.0, 0.50086, "growth")]

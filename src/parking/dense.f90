@@ -41,8 +41,8 @@ module anm_parking_dense
    integer(i8), parameter :: move_salt = 6148914691236517205_i8
    !> Largest rotation step (rad) and translation step (fraction of the sieve's largest width).
    real(wp), parameter :: max_angle = 1.0_wp, max_step = 0.25_wp
-   !> Largest growth step (fraction of the target scale).
-   real(wp), parameter :: max_growth = 0.2_wp
+   !> Halvings of a growth trial's bisection between the current and the target scale.
+   integer, parameter :: growth_bisections = 4
 
    !> What the strategy needs of the run besides the RSA parameters.
    type :: dense_params_type
@@ -59,15 +59,14 @@ module anm_parking_dense
       real(wp) :: target_acceptance = 0.3_wp
       !> Wall-clock limit (s) after which no round starts (0: none).
       real(wp) :: time_limit = 0.0_wp
-      !> Threads; trials per batch (0: 8 per thread; any value gives the same model).
+      !> Threads; trials per batch (0: 32 per thread; any value gives the same model).
       integer :: nthreads = 1, batch = 0
    end type dense_params_type
 
    !> Move sizes per sieve and the counters of the last sweep.
    type :: move_state_type
-      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step; growth
-      !> step (fraction of the target scale).
-      real(wp), allocatable :: d(:), a(:), dmax(:), g(:)
+      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step.
+      real(wp), allocatable :: d(:), a(:), dmax(:)
       !> Trials and acceptances of the last sweep per sieve: translations, rotations, growths.
       integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:), ng(:), ag(:)
       !> Sweeps done (keys the streams).
@@ -86,9 +85,8 @@ contains
       n = size(max_width)
       ms%d = 0.05_wp * max_width
       ms%dmax = max_step * max_width
-      allocate (ms%a(n), ms%g(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
+      allocate (ms%a(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
       ms%a = 0.2_wp
-      ms%g = 0.05_wp
       ms%nt = 0
       ms%at = 0
       ms%nr = 0
@@ -125,7 +123,7 @@ contains
       real(wp), allocatable :: tsc(:)
       real(wp) :: carry, target, f, request
       integer :: s, round, j, np0
-      integer(i8) :: t1, h, hh
+      integer(i8) :: h, hh
       logical :: grow
       allocate (result(size(ap)), tsc(0))
       call new_move_state(ms, ap(:)%max_width)
@@ -134,19 +132,19 @@ contains
       carry = 0.0_wp
       do s = 1, size(ap)
          target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
+         if (pk%ndead > 0) call pk%compact()
          call park_rsa(pk, ks, ap(s:s), rp, [target / rp%vbox], r1, run, error)
          if (allocated(error)) return
          call extend_targets(tsc, pk, 1.0_wp)
          res = r1(1)
          round = 0
          do while (.not. res%reached .and. round < dp%rounds)
-            if (dp%time_limit > 0.0_wp) then
-               call system_clock(t1)
-               if (real(t1 - run%t0, wp) / run%rate > dp%time_limit) exit
-            end if
+            if (out_of_time(dp, run)) exit
             round = round + 1
+            ! the sieve and the one before move: they open room for the next insertions (larger
+            ! particles are settled, and moving them among many small ones is costly)
             do j = 1, dp%sweeps
-               call relax_sweep(pk, ms, dp, tsc)
+               call relax_sweep(pk, ms, dp, tsc, first_sieve=max(1, s - 1))
             end do
             a2 = ap(s)
             h = int(s, i8) * 65536_i8 + round
@@ -159,18 +157,19 @@ contains
             full = sieve_totals(pk, s, rp, tsc)
             request = (target - full%vol) * f**3
             np0 = pk%np
+            if (pk%ndead > 0) call pk%compact()
             call park_rsa(pk, ks, [a2], rp, [request / rp%vbox], r1, run, error)
             if (allocated(error)) return
             call extend_targets(tsc, pk, 1.0_wp / f)
             if (grow .and. pk%np > np0) then
                do j = 1, dp%sweeps
-                  call relax_sweep(pk, ms, dp, tsc)
+                  call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
                end do
             end if
             full = sieve_totals(pk, s, rp, tsc)
             if (grow .and. full%vol >= target - 0.5_wp * full%vol / max(1, full%count)) then
                ! enough particles once grown: grow them; those that cannot grow go (next round)
-               call finish_growth(pk, ms, dp, tsc, s)
+               call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
                call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
                full = sieve_totals(pk, s, rp, tsc)
             end if
@@ -179,7 +178,7 @@ contains
             call round_line(rp, ms, s, round, res, full, target)
          end do
          if (grow) then
-            call finish_growth(pk, ms, dp, tsc, s)
+            call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
             call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
             res = sieve_totals(pk, s, rp)
             res%reached = res%vol >= target - 0.5_wp * res%vol / max(1, res%count)
@@ -188,6 +187,17 @@ contains
          carry = merge(target - res%vol, 0.0_wp, res%reached .and. rp%carry)
       end do
    end subroutine park_dense
+
+   !> Whether the run has passed the wall-clock limit `dp%time_limit` (never when it is 0).
+   logical function out_of_time(dp, run) result(late)
+      type(dense_params_type), intent(in) :: dp
+      type(run_state_type), intent(in) :: run
+      integer(i8) :: t1
+      late = .false.
+      if (dp%time_limit <= 0.0_wp) return
+      call system_clock(t1)
+      late = real(t1 - run%t0, wp) / run%rate > dp%time_limit
+   end function out_of_time
 
    !> Targets of the particles parked since the last call: scale times `factor` (1: at full size).
    pure subroutine extend_targets(tsc, pk, factor)
@@ -253,24 +263,31 @@ contains
       end do
    end function sieve_totals
 
-   !> Growth sweeps after a sieve's last round, while particles of sieve s are below their target
-   !> size and their volume still grows (stop after 10 sweeps without 0.01 % gain, or 50 x sweeps).
-   subroutine finish_growth(pk, ms, dp, tsc, s)
+   !> Growth sweeps of sieve s while some of its particles are below their target
+   !> size and their volume still grows (stop after 10 sweeps without 0.01 % gain, after 50 x
+   !> sweeps, or when the wall-clock limit has passed); only the particles still short and their
+   !> neighbours move.
+   !> A progress line (on `unit` >= 0) gives the sweeps done, the particles still short and the
+   !> sieve's fraction.
+   subroutine finish_growth(pk, ms, dp, tsc, s, unit, vbox, run)
       type(packing_type), intent(inout) :: pk
       type(move_state_type), intent(inout) :: ms
       type(dense_params_type), intent(in) :: dp
       real(wp), intent(in) :: tsc(:)
-      integer, intent(in) :: s
-      integer :: j, idle, i
+      integer, intent(in) :: s, unit
+      real(wp), intent(in) :: vbox
+      type(run_state_type), intent(in) :: run
+      integer :: j, idle, i, nshort
       real(wp) :: vol, best
       best = 0.0_wp
       idle = 0
       do j = 1, 50 * dp%sweeps
-         if (.not. any(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))) exit
+         nshort = count(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))
          vol = 0.0_wp
          do i = 1, pk%np
             if (pk%sieve(i) == s) vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
          end do
+         if (nshort == 0 .or. out_of_time(dp, run)) exit
          if (vol > best * (1.0_wp + 1.0e-4_wp)) then
             best = vol
             idle = 0
@@ -278,15 +295,29 @@ contains
             idle = idle + 1
             if (idle >= 10) exit
          end if
-         call relax_sweep(pk, ms, dp, tsc)
+         call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
       end do
+      nshort = count(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))
+      vol = 0.0_wp
+      do i = 1, pk%np
+         if (pk%sieve(i) == s) vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
+      end do
+      if (unit >= 0 .and. j > 1) then
+         write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth ended after ", j - 1, &
+            " sweeps, ", nshort, &
+            " particles short of their size, fraction ", vol / vbox
+         flush (unit)
+      end if
    end subroutine finish_growth
 
-   !> One relaxation sweep: one trial move per particle, particles in id order; move sizes tuned
-   !> afterwards; the cell list compacted. With `target` (scale per particle id), a particle below
-   !> its target tries a growth step in a third of its trials.
-   !> Length: about 80 lines; the batch's parallel trial and in-order commit belong together.
-   subroutine relax_sweep(pk, ms, dp, target)
+   !> One relaxation sweep: one trial move per active particle (those of sieve `first_sieve` and
+   !> later, default all; with `near_short` only those below their target scale and those within
+   !> their reach, `growth_set`), in id order;
+   !> move sizes tuned afterwards; the cell list compacted when a quarter of its records are
+   !> retired. With `target` (scale per particle id), a particle below
+   !> its target tries a growth to contact in half of its trials (`evaluate`).
+   !> Length: about 90 lines; the batch's parallel trial and in-order commit belong together.
+   subroutine relax_sweep(pk, ms, dp, target, first_sieve, near_short)
       !> Packing.
       type(packing_type), intent(inout) :: pk
       !> Move sizes and counters.
@@ -295,11 +326,15 @@ contains
       type(dense_params_type), intent(in) :: dp
       !> Target scale of each particle (growth).
       real(wp), intent(in), optional :: target(:)
+      !> Only particles of this sieve and later sieves move (default 1: all).
+      integer, intent(in), optional :: first_sieve
+      !> Only particles below their target scale and their neighbours move (default false).
+      logical, intent(in), optional :: near_short
       type(fit_scratch_type), allocatable :: scr(:)
-      real(wp), allocatable :: xn(:, :), rn(:, :, :), sn(:), cx(:, :), cr(:), tg(:)
+      real(wp), allocatable :: xn(:, :), rn(:, :, :), sn(:), sq(:), cx(:, :), cr(:), tg(:)
       logical, allocatable :: ok(:), inside(:)
-      integer, allocatable :: typ(:)
-      integer :: nb, i0, n, b, i, t, nc, s, np
+      integer, allocatable :: typ(:), act(:)
+      integer :: nb, i0, n, b, i, t, nc, s, np, s0, na
       integer(i8) :: k
       real(wp) :: rb
       ms%sweep = ms%sweep + 1
@@ -316,34 +351,40 @@ contains
       else
          tg = pk%scale(:np)
       end if
+      s0 = 1
+      if (present(first_sieve)) s0 = first_sieve
+      act = pack([(i, i=1, np)], pk%sieve(:np) >= s0)
+      if (present(near_short)) then
+         if (near_short) act = growth_set(pk, tg, s0)
+      end if
+      na = size(act)
       nb = dp%batch
-      if (nb <= 0) nb = 8 * max(1, dp%nthreads)
-      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sn(nb), ok(nb), inside(nb), typ(nb))
+      if (nb <= 0) nb = 32 * max(1, dp%nthreads)
+      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sn(nb), sq(nb), ok(nb), inside(nb), &
+                typ(nb))
       ! committed moves of the batch: old and new centres, bounding radius
       allocate (cx(3, 2 * nb), cr(2 * nb))
       i0 = 0
-      do while (i0 < np)
-         n = min(nb, np - i0)
-         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sn, ok, inside, typ, n, i0, k, scr, tg) &
+      do while (i0 < na)
+         n = min(nb, na - i0)
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sn, sq, ok, inside, typ, n, i0, k, scr, tg, act) &
          !$omp private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
-            i = i0 + b
-            call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sn(b), typ(b), inside(b))
-            ok(b) = .false.
-            if (inside(b)) then
-               t = omp_get_thread_num()
-               ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), sn(b), scr(t), exclude=i)
-            end if
+            i = act(i0 + b)
+            call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b))
+            t = omp_get_thread_num()
+            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b), scr(t), sn(b), ok(b))
          end do
          !$omp end parallel do
          nc = 0
          do b = 1, n
-            i = i0 + b
+            i = act(i0 + b)
             s = pk%sieve(i)
-            rb = pk%rho(i) * max(1.0_wp, sn(b) / pk%scale(i))
+            ! the trial's reach: its largest candidate scale
+            rb = pk%rho(i) * max(1.0_wp, sq(b) / pk%scale(i))
             if (inside(b)) then
                if (conflicts(pk, xn(:, b), rb, cx, cr, nc)) then
-                  ok(b) = pk%fits(pk%kind_of(i), xn(:, b), rn(:, :, b), sn(b), scr(0), exclude=i)
+                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b), scr(0), sn(b), ok(b))
                end if
             end if
             select case (typ(b))
@@ -368,13 +409,72 @@ contains
          i0 = i0 + n
       end do
       call tune(ms, dp%target_acceptance)
-      call pk%compact()
+      if (4 * pk%ndead > pk%np) call pk%compact()
    end subroutine relax_sweep
 
+   !> The particles of sieve s0 and later that are below their target scale `tg`, and those of
+   !> the same sieves whose bounding spheres meet such a particle's bounding sphere at its target
+   !> size (they make room by moving), in id order.
+   function growth_set(pk, tg, s0) result(act)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: tg(:)
+      integer, intent(in) :: s0
+      integer, allocatable :: act(:)
+      logical, allocatable :: on(:)
+      integer, allocatable :: ids(:)
+      real(wp), allocatable :: shifts(:, :)
+      integer :: i, m, n
+      allocate (on(pk%np), ids(64), shifts(3, 64))
+      on = .false.
+      do i = 1, pk%np
+         if (pk%sieve(i) < s0 .or. pk%scale(i) >= tg(i)) cycle
+         on(i) = .true.
+         call pk%neighbours(pk%center(:, i), pk%rho(i) * tg(i) / pk%scale(i), ids, shifts, n)
+         do m = 1, n
+            if (pk%sieve(ids(m)) >= s0) on(ids(m)) = .true.
+         end do
+      end do
+      act = pack([(i, i=1, pk%np)], on)
+   end function growth_set
+
+   !> Outcome of the trial of particle i (pose x, r; scale sq; type typ; inside): ok when it
+   !> fits. A growth trial (typ 3, sq its target) grows to contact: the target scale when it
+   !> fits, else the largest scale found by bisection between the current scale and the target
+   !> (`growth_bisections` halvings), ok when that is larger than the current scale. The result
+   !> depends only on the particle and the packing within the trial's reach.
+   subroutine evaluate(pk, i, x, r, sq, typ, inside, scr, sc, ok)
+      type(packing_type), intent(in) :: pk
+      integer, intent(in) :: i, typ
+      real(wp), intent(in) :: x(3), r(3, 3), sq
+      logical, intent(in) :: inside
+      type(fit_scratch_type), intent(inout) :: scr
+      real(wp), intent(out) :: sc
+      logical, intent(out) :: ok
+      real(wp) :: lo, hi, mid
+      integer :: j
+      sc = sq
+      ok = .false.
+      if (.not. inside) return
+      ok = pk%fits(pk%kind_of(i), x, r, sq, scr, exclude=i)
+      if (ok .or. typ /= 3) return
+      lo = pk%scale(i)
+      hi = sq
+      do j = 1, growth_bisections
+         mid = 0.5_wp * (lo + hi)
+         if (pk%fits(pk%kind_of(i), x, r, mid, scr, exclude=i)) then
+            lo = mid
+         else
+            hi = mid
+         end if
+      end do
+      sc = lo
+      ok = lo > pk%scale(i)
+   end subroutine evaluate
+
    !> The trial of particle i in sweep k: new centre x, rotation r and scale sc; typ 1
-   !> translation, 2 rotation, 3 growth (a particle below its target scale `tgt`, a third of its
-   !> trials: the scale grows by g(s) times the target, capped at the target); inside false when
-   !> a walled box's centre would leave the box.
+   !> translation, 2 rotation, 3 growth (a particle below its target scale `tgt`, half of its
+   !> trials: sc is the target, `evaluate` finds how far it grows); inside false when a walled
+   !> box's centre would leave the box.
    subroutine propose(pk, ms, seed, k, i, tgt, x, r, sc, typ, inside)
       type(packing_type), intent(in) :: pk
       type(move_state_type), intent(in) :: ms
@@ -394,9 +494,9 @@ contains
       sc = pk%scale(i)
       inside = .true.
       if (sc < tgt) then
-         if (rng%uniform() < 1.0_wp / 3.0_wp) then
+         if (rng%uniform() < 0.5_wp) then
             typ = 3
-            sc = min(tgt, sc + ms%g(s) * tgt)
+            sc = tgt
             return
          end if
       end if
@@ -458,11 +558,6 @@ contains
             ms%d(s) = min(ms%dmax(s), max(0.5_wp * ms%d(s), min(2.0_wp * ms%d(s), ms%d(s) * (acc + 1.0_wp) &
                                                                  / (target + 1.0_wp))))
          end if
-         if (ms%ng(s) > 0) then
-            acc = real(ms%ag(s), wp) / real(ms%ng(s), wp)
-            ms%g(s) = min(max_growth, max(0.5_wp * ms%g(s), min(2.0_wp * ms%g(s), ms%g(s) * (acc + 1.0_wp) &
-                                                                / (target + 1.0_wp))))
-         end if
          if (ms%nr(s) > 0) then
             acc = real(ms%ar(s), wp) / real(ms%nr(s), wp)
             ms%a(s) = min(max_angle, max(0.5_wp * ms%a(s), min(2.0_wp * ms%a(s), ms%a(s) * (acc + 1.0_wp) &
@@ -481,10 +576,10 @@ contains
       real(wp) :: acc
       if (rp%progress_unit < 0) return
       acc = real(ms%at(s) + ms%ar(s) + ms%ag(s), wp) / max(1.0_wp, real(ms%nt(s) + ms%nr(s) + ms%ng(s), wp))
-      write (rp%progress_unit, '(a,i0,a,i0,a,i0,a,f8.5,a,f8.5,a,f8.5,a,f5.3,a,es9.2,a,f6.3,a,f6.3)') "sieve ", s, &
+      write (rp%progress_unit, '(a,i0,a,i0,a,i0,a,f8.5,a,f8.5,a,f8.5,a,f5.3,a,es9.2,a,f6.3,a)') "sieve ", s, &
          ": dense round ", round, ", ", res%count, " particles, fraction ", res%vol / rp%vbox, " (", &
          full%vol / rp%vbox, " when grown) of ", target / rp%vbox, ", acceptance ", acc, ", step ", ms%d(s), &
-         " mm, ", ms%a(s), " rad, growth ", ms%g(s)
+         " mm, ", ms%a(s), " rad"
       flush (rp%progress_unit)
    end subroutine round_line
 end module anm_parking_dense
