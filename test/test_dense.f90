@@ -32,6 +32,10 @@ contains
               new_unittest("moves never overlap: spheres, periodic, brute force after every sweep", test_spheres_periodic), &
               new_unittest("moves never overlap: spheres, walls, brute force after every sweep", test_spheres_walls), &
               new_unittest("moves never overlap: ellipsoids, all pairs certified after every sweep", test_ellipsoids), &
+              new_unittest("growth to contact never overlaps: spheres, periodic, brute force after every sweep", &
+                           test_growth_periodic), &
+              new_unittest("growth to contact never overlaps: spheres, walls, brute force after every sweep", &
+                           test_growth_walls), &
               new_unittest("moves randomise aligned ellipsoids: orientation eigenvalues 1/3", test_isotropy), &
               new_unittest("dense spheres pass the RSA jamming limit 0.3841 and verify", test_beyond_rsa), &
               new_unittest("exclusion shells keep the gap 2t (spheres, dense)", test_shell_gap), &
@@ -91,7 +95,8 @@ contains
       end do
    end subroutine fill
 
-   !> Smallest surface gap between unit spheres (nearest image) and the largest wall excursion.
+   !> Smallest surface gap between spheres of radius `scale` (nearest image) and the largest wall
+   !> excursion.
    subroutine sphere_gaps(pk, gmin, wall)
       type(packing_type), intent(in) :: pk
       real(wp), intent(out) :: gmin, wall
@@ -100,12 +105,12 @@ contains
       gmin = huge(1.0_wp)
       wall = -huge(1.0_wp)
       do i = 1, pk%np
-         if (.not. pk%p%periodic) wall = max(wall, maxval(1.0_wp - pk%center(:, i)), &
-                                             maxval(pk%center(:, i) + 1.0_wp - pk%p%box))
+         if (.not. pk%p%periodic) wall = max(wall, maxval(pk%scale(i) - pk%center(:, i)), &
+                                             maxval(pk%center(:, i) + pk%scale(i) - pk%p%box))
          do j = i + 1, pk%np
             d = pk%center(:, i) - pk%center(:, j)
             if (pk%p%periodic) d = d - pk%p%box * anint(d / pk%p%box)
-            gmin = min(gmin, norm2(d) - 2.0_wp)
+            gmin = min(gmin, norm2(d) - pk%scale(i) - pk%scale(j))
          end do
       end do
    end subroutine sphere_gaps
@@ -141,6 +146,53 @@ contains
          real(ms%at(1), wp) / max(1_i8, ms%nt(1)), ", smallest gap ", gmin
       call check(error, nmoved > pk%np / 2, "most spheres did not move")
    end subroutine sphere_sweeps
+
+   !> Growth to contact never overlaps: unit spheres with targets of radius 1.4 (periodic or
+   !> walled box), only the growing spheres and their neighbours moving; exact gaps of all pairs
+   !> after every sweep.
+   subroutine growth_sweeps(error, periodic)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      type(packing_type) :: pk
+      type(move_state_type) :: ms
+      type(dense_params_type) :: dp
+      real(wp) :: gmin, wall
+      real(wp), allocatable :: tsc(:)
+      integer :: k
+      call one_kind_packing(pk, periodic, [10.0_wp, 10.0_wp, 10.0_wp], 1.0_wp, 1.0_wp, 1.0_wp, error)
+      if (allocated(error)) return
+      call fill(pk, 120, 2000, 7_i8)
+      allocate (tsc(pk%np))
+      tsc = 1.4_wp
+      call new_move_state(ms, [2.8_wp])
+      dp%nthreads = omp_get_max_threads()
+      dp%batch = 7
+      do k = 1, 25
+         call relax_sweep(pk, ms, dp, tsc, first_sieve=1, near_short=.true.)
+         call sphere_gaps(pk, gmin, wall)
+         call check(error, gmin >= 0.0_wp, "growth created an overlap")
+         if (allocated(error)) return
+         if (.not. periodic) then
+            call check(error, wall <= 0.0_wp, "growth crossed a wall")
+            if (allocated(error)) return
+         end if
+      end do
+      print '(a,i0,a,f7.4,a,f6.3,a,i0,a,es9.2)', "        ", pk%np, " spheres, fraction ", &
+         sum(pk%scale(:pk%np)**3) * pk%kinds(1)%volume / 1000.0_wp, ", mean radius ", &
+         sum(pk%scale(:pk%np)) / pk%np, ", full size ", count(pk%scale(:pk%np) >= 1.4_wp), ", smallest gap ", gmin
+      call check(error, sum(pk%scale(:pk%np)) / pk%np > 1.05_wp, "the spheres hardly grew")
+      call check(error, all(pk%scale(:pk%np) <= 1.4_wp), "a sphere grew past its target")
+   end subroutine growth_sweeps
+
+   subroutine test_growth_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call growth_sweeps(error, .true.)
+   end subroutine test_growth_periodic
+
+   subroutine test_growth_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call growth_sweeps(error, .false.)
+   end subroutine test_growth_walls
 
    subroutine test_spheres_periodic(error)
       type(error_type), allocatable, intent(out) :: error

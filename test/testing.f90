@@ -105,12 +105,13 @@ contains
 
    !> Condition must hold.
    subroutine check_logical(error, condition, message)
-      !> Error on failure.
-      type(error_type), allocatable, intent(out) :: error
+      !> Error on failure (an earlier failure is kept: checks in a row report the first).
+      type(error_type), allocatable, intent(inout) :: error
       !> Condition.
       logical, intent(in) :: condition
       !> Message when it does not hold.
       character(len=*), intent(in), optional :: message
+      if (allocated(error)) return
       if (.not. condition) then
          if (present(message)) then
             call fatal_error(error, message)
@@ -122,12 +123,13 @@ contains
 
    !> Integers must be equal.
    subroutine check_int(error, actual, expected, message)
-      !> Error on failure.
-      type(error_type), allocatable, intent(out) :: error
+      !> Error on failure (an earlier failure is kept: checks in a row report the first).
+      type(error_type), allocatable, intent(inout) :: error
       !> Values.
       integer, intent(in) :: actual, expected
       !> Context.
       character(len=*), intent(in), optional :: message
+      if (allocated(error)) return
       if (actual /= expected) then
          call fatal_error(error, ctx(message)//"expected "//to_string(expected)//", got "//to_string(actual))
       end if
@@ -135,8 +137,8 @@ contains
 
    !> Reals must agree within an absolute (thr) or relative (rel) tolerance (default rel 1e-12).
    subroutine check_real(error, actual, expected, message, thr, rel)
-      !> Error on failure.
-      type(error_type), allocatable, intent(out) :: error
+      !> Error on failure (an earlier failure is kept: checks in a row report the first).
+      type(error_type), allocatable, intent(inout) :: error
       !> Values.
       real(wp), intent(in) :: actual, expected
       !> Context.
@@ -147,6 +149,7 @@ contains
       real(wp), intent(in), optional :: rel
       logical :: ok
       real(wp) :: diff
+      if (allocated(error)) return
       diff = abs(actual - expected)
       if (present(thr)) then
          ok = diff <= thr

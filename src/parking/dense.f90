@@ -41,6 +41,8 @@ module anm_parking_dense
    integer(i8), parameter :: move_salt = 6148914691236517205_i8
    !> Largest rotation step (rad) and translation step (fraction of the sieve's largest width).
    real(wp), parameter :: max_angle = 1.0_wp, max_step = 0.25_wp
+   !> Relative shortfall of a sieve below which no further dense round starts (0.5 %).
+   real(wp), parameter :: round_tolerance = 0.005_wp
    !> Halvings of a growth trial's bisection between the current and the target scale.
    integer, parameter :: growth_bisections = 4
 
@@ -167,26 +169,35 @@ contains
                end do
             end if
             full = sieve_totals(pk, s, rp, tsc)
-            if (grow .and. full%vol >= target - 0.5_wp * full%vol / max(1, full%count)) then
+            if (grow .and. close_enough(full, target)) then
                ! enough particles once grown: grow them; those that cannot grow go (next round)
                call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
                call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
                full = sieve_totals(pk, s, rp, tsc)
             end if
             res = sieve_totals(pk, s, rp)
-            res%reached = full%vol >= target - 0.5_wp * full%vol / max(1, full%count)
+            res%reached = close_enough(full, target)
             call round_line(rp, ms, s, round, res, full, target)
          end do
          if (grow) then
             call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
             call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
             res = sieve_totals(pk, s, rp)
-            res%reached = res%vol >= target - 0.5_wp * res%vol / max(1, res%count)
+            res%reached = close_enough(res, target)
          end if
          result(s) = res
          carry = merge(target - res%vol, 0.0_wp, res%reached .and. rp%carry)
       end do
    end subroutine park_dense
+
+   !> Whether a sieve's volume (res) is close enough to its target that no further round is
+   !> worth it: short by less than half a mean particle or by less than `round_tolerance` of the
+   !> target.
+   pure logical function close_enough(res, target) result(yes)
+      type(sieve_result_type), intent(in) :: res
+      real(wp), intent(in) :: target
+      yes = res%vol >= target - max(0.5_wp * res%vol / max(1, res%count), round_tolerance * target)
+   end function close_enough
 
    !> Whether the run has passed the wall-clock limit `dp%time_limit` (never when it is 0).
    logical function out_of_time(dp, run) result(late)
