@@ -7,7 +7,8 @@ and follows the packing fraction of the whole model from them:
 - while a sieve is parked by RSA, its `sieve S: placed N, fraction F of T; ...` lines give its
   fraction, and its first `sieve S done: ..., fraction F ...` line the fraction RSA reached;
 - after that only `sieve S: dense round R, N particles, fraction F ...` and `sieve S: growth ended
-  after N sweeps, M particles short of their size, fraction F` lines change it (the RSA
+  after N sweeps, M particles short of their size, fraction F` lines (and the `growth sweep N, ...`
+  lines every 10 sweeps) change it (the RSA
   passes inside a dense round print their own `placed`/`done` lines for the round's request only,
   which are ignored).
 
@@ -32,7 +33,7 @@ from pathlib import Path
 PLACED = re.compile(r"^sieve (\d+): placed \d+, fraction\s+([0-9.Ee+-]+) of")
 DONE = re.compile(r"^sieve (\d+) done: \d+ particles, fraction\s+([0-9.Ee+-]+)")
 ROUND = re.compile(r"^sieve (\d+): dense round \d+, \d+ particles, fraction\s+([0-9.Ee+-]+)")
-GROWTH = re.compile(r"^sieve (\d+): growth ended after \d+ sweeps, \d+ particles short of their size, "
+GROWTH = re.compile(r"^sieve (\d+): growth (?:ended after \d+ sweeps|sweep \d+), \d+ particles short of their size, "
                     r"fraction\s+([0-9.Ee+-]+)")
 
 

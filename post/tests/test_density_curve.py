@@ -20,6 +20,7 @@ LOG = """\
 [    12.75] sieve 2 done: 250 particles, fraction  0.10200 (target  0.15000), 999 attempts, 0 particles not parked, 1 s
 [    21.87] sieve 2: dense round 1, 282 particles, fraction  0.14500 ( 0.14765 when grown) of  0.15000, acceptance 0.5
 [    22.10] sieve 2 done: 30 particles, fraction  0.00100 (target  0.00100), 99 attempts, 0 particles not parked, 1 s
+[    25.00] sieve 2: growth sweep 10, 9 particles short of their size, fraction  0.14800
 [    30.00] sieve 2: growth ended after 12 sweeps, 3 particles short of their size, fraction  0.14900
 """
 
@@ -33,4 +34,4 @@ def test_curve_follows_sieves_and_ignores_round_requests(tmp_path):
     totals = [(float(t), round(float(f), 5), e) for t, f, _, e in rows]
     assert totals == [(2.06, 0.26808, "placed"), (2.31, 0.31416, "sieve done"), (12.47, 0.35186, "dense round"),
                       (12.55, 0.40186, "placed"), (12.75, 0.45386, "sieve done"), (21.87, 0.49686, "dense round"),
-                      (30.0, 0.50086, "growth")]
+                      (25.0, 0.49986, "growth"), (30.0, 0.50086, "growth")]

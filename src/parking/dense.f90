@@ -288,16 +288,17 @@ contains
       integer, intent(in) :: s, unit
       real(wp), intent(in) :: vbox
       type(run_state_type), intent(in) :: run
-      integer :: j, idle, i, nshort
+      integer :: j, idle, nshort
       real(wp) :: vol, best
       best = 0.0_wp
       idle = 0
       do j = 1, 50 * dp%sweeps
-         nshort = count(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))
-         vol = 0.0_wp
-         do i = 1, pk%np
-            if (pk%sieve(i) == s) vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
-         end do
+         call growth_state(pk, tsc, s, nshort, vol)
+         if (unit >= 0 .and. j > 1 .and. mod(j - 1, 10) == 0) then
+            write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth sweep ", j - 1, ", ", nshort, &
+               " particles short of their size, fraction ", vol / vbox
+            flush (unit)
+         end if
          if (nshort == 0 .or. out_of_time(dp, run)) exit
          if (vol > best * (1.0_wp + 1.0e-4_wp)) then
             best = vol
@@ -308,18 +309,30 @@ contains
          end if
          call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
       end do
-      nshort = count(pk%sieve(:pk%np) == s .and. pk%scale(:pk%np) < tsc(:pk%np))
-      vol = 0.0_wp
-      do i = 1, pk%np
-         if (pk%sieve(i) == s) vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
-      end do
+      call growth_state(pk, tsc, s, nshort, vol)
       if (unit >= 0 .and. j > 1) then
-         write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth ended after ", j - 1, &
-            " sweeps, ", nshort, &
-            " particles short of their size, fraction ", vol / vbox
+         write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth ended after ", min(j - 1, 50 * dp%sweeps), &
+            " sweeps, ", nshort, " particles short of their size, fraction ", vol / vbox
          flush (unit)
       end if
    end subroutine finish_growth
+
+   !> Particles of sieve s below their target scale, and the sieve's volume (mm^3) as it is.
+   pure subroutine growth_state(pk, tsc, s, nshort, vol)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: tsc(:)
+      integer, intent(in) :: s
+      integer, intent(out) :: nshort
+      real(wp), intent(out) :: vol
+      integer :: i
+      nshort = 0
+      vol = 0.0_wp
+      do i = 1, pk%np
+         if (pk%sieve(i) /= s) cycle
+         vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
+         if (pk%scale(i) < tsc(i)) nshort = nshort + 1
+      end do
+   end subroutine growth_state
 
    !> One relaxation sweep: one trial move per active particle (those of sieve `first_sieve` and
    !> later, default all; with `near_short` only those below their target scale and those within
