@@ -14,7 +14,8 @@ summary table (`NAME-summary.csv`, row `total`):
 Both strategies use void placement, 2,000 locations and `max_failures = 100` (RSA's own stopping
 rule); the dense runs add `strategy = 'dense'`, `dense_sweeps = 4`, `dense_grow_scale = 0.7` and
 `dense_time_limit = --time-limit` seconds. Each row gives the target, the total reached, the
-particles and the wall and CPU seconds of the run.
+particles and the wall and CPU seconds of the run; each run's progress lines are kept in
+`WORK/GRADATION-STRATEGY.log`.
 
     python3 scripts/dense_table.py --anm build/install/bin/anm --out table.md [--only concrete,msand]
         [--total 0.60] [--time-limit 540] [--work DIR]
@@ -104,6 +105,7 @@ def run(anm: str, nml: Path, outdir: Path) -> dict:
     proc = subprocess.run([anm, "run", "--force", str(nml)], env=env, capture_output=True, text=True)
     wall = time.monotonic() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    nml.with_suffix(".log").write_text(proc.stderr)
     if proc.returncode != 0:
         sys.stderr.write(proc.stderr[-2000:])
         raise SystemExit(f"dense_table: anm run {nml} failed (exit {proc.returncode})")
