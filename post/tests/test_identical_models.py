@@ -4,13 +4,18 @@ model (box, shapes, particles, sieves) is compared, by SHA-256 of its bytes, wit
 recorded in data/identical_models.json.
 
 The digests were recorded with the release build (scripts/flags.sh: -march=native) on the
-project's machines. Random sequential addition is chaotic: a different floating-point
-contraction (another CPU family, another compiler) changes accept decisions and with them the
-model. When that, and nothing else, changed, re-record with
+project's machines. The last bits of floating-point results depend on the CPU family: libm and
+libmvec pick their code by the CPU's instruction sets (AVX2 or AVX-512, FMA), and -march=native
+changes vectorisation and contraction. Random sequential addition is chaotic, so such bits can
+change the model. Each job therefore keeps a list of digest sets, one per CPU family met so far
+(2026-11-27: an AVX-512 EPYC gave shape coefficients differing in their last bits from the set
+recorded on 2026-11-25), and a model must equal one of them. On a new CPU family, when the
+models differ and nothing else changed, add its set with
 
     ANM_RECORD_DIGESTS=1 python3 -m pytest post/tests/test_identical_models.py
 
-and say why in the commit message. A refactoring must never need that.
+(a set equal to a recorded one is not added) and say why in the commit message. A refactoring
+must never need that: on a machine whose set is recorded, a change of the model fails.
 """
 import hashlib
 import json
@@ -80,12 +85,39 @@ def test_model_identical_to_recorded(job, anm_bin, tmp_path, request):
     shapes_dir = request.getfixturevalue("shapes_dir") if needs_shapes else None
     digest = model_digest(run_job(anm_bin, nml_name, tmp_path, shapes_dir))
     if os.environ.get("ANM_RECORD_DIGESTS") == "1":
-        recorded = json.loads(DIGESTS.read_text()) if DIGESTS.exists() else {}
-        recorded[job] = digest
-        DIGESTS.write_text(json.dumps(recorded, indent=1, sort_keys=True) + "\n")
+        record(job, digest)
         pytest.skip("digests recorded")
-    recorded = json.loads(DIGESTS.read_text())[job]
-    missing = sorted(set(recorded) - set(digest))
-    changed = sorted(k for k in recorded if k in digest and digest[k] != recorded[k])
+    changed, missing = compare(job, digest)
     assert not missing, f"{job}: datasets missing from the model: {missing}"
-    assert not changed, f"{job}: datasets that changed: {changed}"
+    assert not changed, f"{job}: datasets that changed (against the closest recorded set): {changed}"
+
+
+def recorded_sets(job):
+    """The digest sets recorded for a job (one per CPU family)."""
+    value = json.loads(DIGESTS.read_text())[job]
+    return value if isinstance(value, list) else [value]
+
+
+def compare(job, digest):
+    """Datasets that changed and datasets missing, against the recorded set closest to `digest`
+    (both empty when the model equals one of the sets)."""
+    best = None
+    for rec in recorded_sets(job):
+        missing = sorted(set(rec) - set(digest))
+        changed = sorted(k for k in rec if k in digest and digest[k] != rec[k])
+        extra = sorted(set(digest) - set(rec))
+        score = len(missing) + len(changed) + len(extra)
+        if best is None or score < best[0]:
+            best = (score, changed + [f"{k} (not recorded)" for k in extra], missing)
+    return best[1], best[2]
+
+
+def record(job, digest):
+    """Add `digest` to the job's recorded sets unless it equals one of them."""
+    data = json.loads(DIGESTS.read_text()) if DIGESTS.exists() else {}
+    sets = data.get(job, [])
+    sets = sets if isinstance(sets, list) else [sets]
+    if digest not in sets:
+        sets.append(digest)
+    data[job] = sets
+    DIGESTS.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")

@@ -11,7 +11,6 @@ by h5py and anm_post (Python validation), and by the serial program's reader (`a
 
 Needs $ANM_MPI_BIN (scripts/test.sh sets it); skipped without it, a failure under CI=true.
 """
-import json
 import math
 import os
 import pathlib
@@ -24,7 +23,7 @@ import h5py
 import numpy as np
 import pytest
 
-from test_identical_models import DIGESTS, model_digest
+from test_identical_models import compare as compare_recorded, model_digest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 # every rank count and both thread counts in four runs (the CI time on 2 cores); ANM_MPI_CASES=all
@@ -76,10 +75,9 @@ def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
     # one summary (rank 0 alone writes and prints)
     assert res.stdout.count("model: ") == 1, res.stdout
     digest = model_digest(tmp_path / "default.h5")
-    recorded = json.loads(DIGESTS.read_text())["default"]
-    changed = sorted(k for k in recorded if digest.get(k) != recorded[k])
-    assert not changed, f"{ranks} ranks x {threads} threads: datasets that differ from the serial model: {changed}"
-    assert set(digest) == set(recorded)
+    changed, missing = compare_recorded("default", digest)
+    assert not changed and not missing, (f"{ranks} ranks x {threads} threads: datasets that differ from the serial "
+                                         f"model: {changed + missing}")
 
 
 def compare(a, b):
