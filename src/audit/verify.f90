@@ -5,16 +5,19 @@
 !> to B's body frame and tested against r_B; the penetration of a point is r_B(y/|y|) - |y| (radial,
 !> in mm). In non-periodic boxes every surface point must lie inside the box.
 !>
-!> Bounding radii are the largest sampled radius on a grid twice as fine, times 1.02 (a safety
-!> margin much larger than the variation of r between samples at the orders used).
+!> Bounding radii are the largest sampled radius on the sampling grid times 1.02, or the largest
+!> cube-map bound of r (below) when that is larger.
 !>
-!> Pruning (the result is the same as testing every sample): the samples are grouped in blocks of
-!> 6 x 6; each block of B has an upper bound of r_B over its directions (the largest sample of the
-!> block and of its one-sample border, times 1.02). A ball of A's samples (all of A, then each
-!> block) is skipped when, seen from B's centre, it lies beyond the largest bound of the blocks its
-!> angular cap touches: none of its samples can then be inside B. A sand grain beside a 10 mm
-!> aggregate thus costs a few bound look-ups instead of 28,800 evaluations of the aggregate's
-!> order-14 surface.
+!> Pruning (the result is the same as testing every sample): each (shape, order) of B has a
+!> cube-map table of proven upper bounds of r_B over cells of directions (anm_audit_bounds: r at
+!> the cell corners plus a curvature allowance from Bernstein's inequality, about 6e-3 of the mean
+!> radius). A's samples are grouped in blocks of 6 x 6 and superblocks of 4 x 4 blocks, each with
+!> a bounding ball. A ball of A's samples (all of A, then each superblock, then each block) is
+!> skipped when, seen from B's centre, it lies beyond the bounds of every cell its cap of
+!> directions meets; a single sample is skipped when it lies beyond its own cell's bound (or could
+!> not be deeper than the depth found so far). Only samples that pass are evaluated exactly. A sand
+!> grain beside a 10 mm aggregate thus costs a few bound look-ups instead of thousands of
+!> evaluations of the aggregate's order-14 surface.
 !>
 !> Certified first filter (default): each (shape, order) also gets the contact body the engine
 !> uses (anm_contact_body), and a pair is sampled only when the certified contact test
