@@ -10,7 +10,7 @@ module test_audit
    use anm_audit_verify, only: verify_report_type, verify_model, verify_split_type
    use anm_shapes_analytic, only: sphere_shape, ellipsoid_shape
    use anm_sh_expansion, only: sh_expansion_type, new_sh_expansion_real
-   use anm_audit_bounds, only: radius_bounds_type, new_radius_bounds, curvature_bound
+   use anm_audit_bounds, only: radius_bounds_type, new_radius_bounds, curvature_bound, bound_at, ball_beyond
    use anm_geometry_rotation, only: random_rotation
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
@@ -285,9 +285,9 @@ contains
          excess = 0.0_wp
          do it = 1, 200000
             u = unit_vector(rng)
-            call check(error, shape%radius_dir(u) <= bounds%at(u), "r above its cell's bound")
+            call check(error, shape%radius_dir(u) <= bound_at(bounds, u), "r above its cell's bound")
             if (allocated(error)) return
-            excess = max(excess, bounds%at(u) - shape%radius_dir(u))
+            excess = max(excess, bound_at(bounds, u) - shape%radius_dir(u))
          end do
          print '(a,i0,a,i0,a,es10.3)', "        shape ", ishape, ": ", bounds%nc, &
             " cells per face edge, largest bound - r (of the mean radius) ", excess / r0
@@ -298,7 +298,7 @@ contains
             u = unit_vector(rng)
             c = shape%radius_dir(u) * u * rng%uniform_range(0.97_wp, 1.3_wp)
             rad = r0 * 10.0_wp**rng%uniform_range(-3.0_wp, -0.5_wp)
-            if (.not. bounds%beyond(c, rad)) cycle
+            if (.not. ball_beyond(bounds, c, rad)) cycle
             nbeyond = nbeyond + 1
             inside = .false.
             do k = 1, 200

@@ -20,15 +20,15 @@
 !>
 !> Usage:
 !>     call new_radius_bounds(bounds, shape, 6.0e-3_wp)
-!>     if (ly >= bounds%at(y)) ...          ! the point y (|y| = ly) is outside the particle
-!>     if (bounds%beyond(c, r)) ...         ! no point of the ball (c, r) is inside the particle
+!>     if (ly >= bound_at(bounds, y)) ...     ! the point y (|y| = ly) is outside the particle
+!>     if (ball_beyond(bounds, c, r)) ...    ! no point of the ball (c, r) is inside the particle
 module anm_audit_bounds
    use anm_core_kinds, only: wp, pi
    use anm_sh_expansion, only: sh_expansion_type
    implicit none
    private
 
-   public :: radius_bounds_type, new_radius_bounds, curvature_bound
+   public :: radius_bounds_type, new_radius_bounds, curvature_bound, bound_at, ball_beyond
 
    !> Cube-map table of upper bounds of r (shape units); immutable after construction.
    type :: radius_bounds_type
@@ -38,11 +38,6 @@ module anm_audit_bounds
       real(wp), allocatable :: ub(:, :, :)
       !> The largest bound (a bound of r over all directions).
       real(wp) :: umax = 0.0_wp
-   contains
-      !> Bound of r over the cell holding a direction.
-      procedure :: at => bound_at
-      !> Whether no point of a ball can lie inside the particle.
-      procedure :: beyond => ball_beyond
    end type radius_bounds_type
 
    !> Cells per face edge: limits.
@@ -128,7 +123,7 @@ contains
    !> Upper bound of r over the cell holding direction y (nonzero, need not be normalised).
    pure real(wp) function bound_at(self, y) result(bound)
       !> Table.
-      class(radius_bounds_type), intent(in) :: self
+      type(radius_bounds_type), intent(in) :: self
       !> Direction.
       real(wp), intent(in) :: y(3)
       real(wp) :: scale
@@ -145,7 +140,7 @@ contains
    !> when the ball holds the centre or its cap's box leaves the face of c).
    pure logical function ball_beyond(self, c, r) result(out)
       !> Table.
-      class(radius_bounds_type), intent(in) :: self
+      type(radius_bounds_type), intent(in) :: self
       !> Ball centre and radius (shape units).
       real(wp), intent(in) :: c(3), r
       real(wp) :: lc, x, ta, w0, q, wa, wb, a, b, inv, delta, limit, cosb, ci, cj, ck, am, bm

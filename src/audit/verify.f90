@@ -44,7 +44,7 @@ module anm_audit_verify
    use anm_core_error, only: error_type
    use anm_contact_body, only: contact_body_type, new_contact_body
    use anm_contact_overlap, only: contact_params_type, bodies_overlap
-   use anm_audit_bounds, only: radius_bounds_type, new_radius_bounds, max_bound_cells
+   use anm_audit_bounds, only: radius_bounds_type, new_radius_bounds, max_bound_cells, bound_at, ball_beyond
    implicit none
    private
 
@@ -103,6 +103,9 @@ module anm_audit_verify
       !> Blocks of block x block samples: bounding ball centre (3, nbt, nbp) and radius.
       integer :: nbt = 0, nbp = 0
       real(wp), allocatable :: bc(:, :, :), br(:, :)
+      !> The samples of each block stored together (3, block**2, nbt, nbp); a block at the grid's
+      !> edge repeats its first sample (a repeated sample changes no depth).
+      real(wp), allocatable :: xb(:, :, :, :)
       !> Superblocks of super x super blocks: bounding ball centre (3, nst, nsp) and radius.
       integer :: nst = 0, nsp = 0
       real(wp), allocatable :: sc(:, :, :), sr(:, :)
@@ -436,7 +439,7 @@ contains
          jb1 = sp%nbp
          if (pruned) then
             ! all of A (inside its bounding sphere) beyond B's surface
-            if (sq%bounds%beyond(t, rho(a) / sb)) return
+            if (ball_beyond(sq%bounds, t, rho(a) / sb)) return
             ! only A's blocks whose directions meet B's bounding sphere
             call cap_blocks(sp, d, rb, ib0, ib1, jb0, jb1)
          end if
@@ -452,30 +455,28 @@ contains
                   if (sum((sp%sc(:, is, js) - d)**2) >= (rb + sp%sr(is, js))**2) then
                      sstate(is, js) = 2
                   else if (pruned) then
-                     if (sq%bounds%beyond(matmul(m, sp%sc(:, is, js)) + t, sp%sr(is, js) * sa / sb)) sstate(is, js) = 2
+                     if (ball_beyond(sq%bounds, matmul(m, sp%sc(:, is, js)) + t, sp%sr(is, js) * sa / sb)) sstate(is, js) = 2
                   end if
                end if
                if (sstate(is, js) == 2) cycle
                if (sum((sp%bc(:, ib, jb) - d)**2) >= (rb + sp%br(ib, jb))**2) cycle
                if (pruned) then
-                  if (sq%bounds%beyond(matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
+                  if (ball_beyond(sq%bounds, matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
                end if
-               do j = (jb - 1) * block + 1, min(sp%np, jb * block)
-                  do i = (ib - 1) * block + 1, min(sp%nt, ib * block)
-                     x = sp%x(:, i, j)
-                     if (sum((x - d)**2) >= rb2) cycle
-                     y = matmul(m, x) + t
-                     ly = norm2(y)
-                     ! r_B cannot reach this point deeper than the depth found so far
-                     if (pruned .and. ly > 0.0_wp) then
-                        if (sq%bounds%at(y) - ly <= depth / sb) cycle
-                     end if
-                     if (ly == 0.0_wp) then
-                        depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
-                     else
-                        depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
-                     end if
-                  end do
+               do i = 1, block * block
+                  x = sp%xb(:, i, ib, jb)
+                  if (sum((x - d)**2) >= rb2) cycle
+                  y = matmul(m, x) + t
+                  ly = norm2(y)
+                  ! r_B cannot reach this point deeper than the depth found so far
+                  if (pruned .and. ly > 0.0_wp) then
+                     if (bound_at(sq%bounds, y) - ly <= depth / sb) cycle
+                  end if
+                  if (ly == 0.0_wp) then
+                     depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
+                  else
+                     depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
+                  end if
                end do
             end do
          end do
@@ -527,7 +528,7 @@ contains
          seen(model%shape(p), model%nmax(p)) = .true.
       end do
       nkey = count(seen)
-      bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (24.0_wp + 32.0_wp / block**2) &
+      bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (48.0_wp + 32.0_wp / block**2) &
               + real(nkey, wp) * 48.0_wp * real(max_bound_cells + 1, wp)**2 + real(model%np, wp) * 320.0_wp
       if (.not. present(filter)) then
          bytes = bytes + real(nkey, wp) * 5.0e6_wp
@@ -600,7 +601,8 @@ contains
       samp%rmax = 1.02_wp * samp%rmax
       samp%nbt = (samp%nt + block - 1) / block
       samp%nbp = (samp%np + block - 1) / block
-      allocate (samp%bc(3, samp%nbt, samp%nbp), samp%br(samp%nbt, samp%nbp))
+      allocate (samp%bc(3, samp%nbt, samp%nbp), samp%br(samp%nbt, samp%nbp), &
+                samp%xb(3, block * block, samp%nbt, samp%nbp))
       do jb = 1, samp%nbp
          do ib = 1, samp%nbt
             associate (pts => samp%x(:, (ib - 1) * block + 1:min(samp%nt, ib * block), &
@@ -614,6 +616,8 @@ contains
                end do
                samp%bc(:, ib, jb) = c
                samp%br(ib, jb) = rr
+               samp%xb(:, :, ib, jb) = spread(pts(:, 1, 1), 2, block * block)
+               samp%xb(:, :size(pts, 2) * size(pts, 3), ib, jb) = reshape(pts, [3, size(pts, 2) * size(pts, 3)])
             end associate
          end do
       end do
