@@ -5,16 +5,19 @@
 !> to B's body frame and tested against r_B; the penetration of a point is r_B(y/|y|) - |y| (radial,
 !> in mm). In non-periodic boxes every surface point must lie inside the box.
 !>
-!> Bounding radii are the largest sampled radius on a grid twice as fine, times 1.02 (a safety
-!> margin much larger than the variation of r between samples at the orders used).
+!> Bounding radii are the largest sampled radius on the sampling grid times 1.02, or the largest
+!> cube-map bound of r (below) when that is larger.
 !>
-!> Pruning (the result is the same as testing every sample): the samples are grouped in blocks of
-!> 6 x 6; each block of B has an upper bound of r_B over its directions (the largest sample of the
-!> block and of its one-sample border, times 1.02). A ball of A's samples (all of A, then each
-!> block) is skipped when, seen from B's centre, it lies beyond the largest bound of the blocks its
-!> angular cap touches: none of its samples can then be inside B. A sand grain beside a 10 mm
-!> aggregate thus costs a few bound look-ups instead of 28,800 evaluations of the aggregate's
-!> order-14 surface.
+!> Pruning (the result is the same as testing every sample): each (shape, order) of B has a
+!> cube-map table of proven upper bounds of r_B over cells of directions (anm_audit_bounds: r at
+!> the cell corners plus a curvature allowance from Bernstein's inequality, about 6e-3 of the mean
+!> radius). A's samples are grouped in blocks of 6 x 6 and superblocks of 4 x 4 blocks, each with
+!> a bounding ball. A ball of A's samples (all of A, then each superblock, then each block) is
+!> skipped when, seen from B's centre, it lies beyond the bounds of every cell its cap of
+!> directions meets; a single sample is skipped when it lies beyond its own cell's bound (or could
+!> not be deeper than the depth found so far). Only samples that pass are evaluated exactly. A sand
+!> grain beside a 10 mm aggregate thus costs a few bound look-ups instead of thousands of
+!> evaluations of the aggregate's order-14 surface.
 !>
 !> Certified first filter (default): each (shape, order) also gets the contact body the engine
 !> uses (anm_contact_body), and a pair is sampled only when the certified contact test
@@ -41,6 +44,7 @@ module anm_audit_verify
    use anm_core_error, only: error_type
    use anm_contact_body, only: contact_body_type, new_contact_body
    use anm_contact_overlap, only: contact_params_type, bodies_overlap
+   use anm_audit_bounds, only: radius_bounds_type, new_radius_bounds, max_bound_cells, bound_at, ball_beyond
    implicit none
    private
 
@@ -88,7 +92,8 @@ module anm_audit_verify
    end interface
 
    !> Per (shape, order): surface sampled on a latitude-longitude grid of cell centres
-   !> theta_i = pi (i - 1/2)/nt, phi_j = 2 pi (j - 1/2)/np, and the bounding radius (shape units).
+   !> theta_i = pi (i - 1/2)/nt, phi_j = 2 pi (j - 1/2)/np, the bounding radius (shape units), and
+   !> the cube-map table of upper bounds of r (see `build_bounds`).
    type :: sampled_type
       integer :: shape = 0, order = -1
       type(sh_expansion_type) :: s
@@ -98,14 +103,23 @@ module anm_audit_verify
       !> Blocks of block x block samples: bounding ball centre (3, nbt, nbp) and radius.
       integer :: nbt = 0, nbp = 0
       real(wp), allocatable :: bc(:, :, :), br(:, :)
-      !> Upper bound of r over the directions of each block (nbt, nbp).
-      real(wp), allocatable :: bmax(:, :)
+      !> The samples of each block stored together (3, block**2, nbt, nbp); a block at the grid's
+      !> edge repeats its first sample (a repeated sample changes no depth).
+      real(wp), allocatable :: xb(:, :, :, :)
+      !> Superblocks of super x super blocks: bounding ball centre (3, nst, nsp) and radius.
+      integer :: nst = 0, nsp = 0
+      real(wp), allocatable :: sc(:, :, :), sr(:, :)
+      !> Upper bounds of r over cells of directions.
+      type(radius_bounds_type) :: bounds
    end type sampled_type
 
-   !> Samples per block edge.
-   integer, parameter :: block = 6
+   !> Samples per block edge, blocks per superblock edge.
+   integer, parameter :: block = 6, super = 4
    !> Pairs (ends) of a (shape, order) from which its contact body is built for the filter.
    integer, parameter :: min_filter_ends = 1000
+   !> Curvature allowance of the radius bounds relative to the mean radius (finer tables prune a
+   !> little more but cost more to look up: 6e-3 took the fewest instructions on a reduced M_sand).
+   real(wp), parameter :: bound_slack = 6.0e-3_wp
 
 contains
 
@@ -406,7 +420,8 @@ contains
       integer, intent(in) :: a, b
       real(wp), intent(in) :: ca(3), cb(3)
       real(wp) :: depth, x(3), y(3), ly, sa, sb, m(3, 3), t(3), d(3), rb, rb2
-      integer :: i, j, ib, jb, jbw, ib0, ib1, jb0, jb1
+      integer :: i, j, ib, jb, jbw, ib0, ib1, jb0, jb1, is, js
+      integer :: sstate(samp(key(a))%nst, samp(key(a))%nsp)
       depth = 0.0_wp
       sa = model%scale(a)
       sb = model%scale(b)
@@ -424,33 +439,44 @@ contains
          jb1 = sp%nbp
          if (pruned) then
             ! all of A (inside its bounding sphere) beyond B's surface
-            if (beyond(sq, t, rho(a) / sb)) return
+            if (ball_beyond(sq%bounds, t, rho(a) / sb)) return
             ! only A's blocks whose directions meet B's bounding sphere
             call cap_blocks(sp, d, rb, ib0, ib1, jb0, jb1)
          end if
+         ! superblocks: 0 not yet tested, 1 to visit, 2 skipped
+         sstate = 0
          do jbw = jb0, jb1
             jb = 1 + modulo(jbw - 1, sp%nbp)
             do ib = ib0, ib1
+               is = (ib - 1) / super + 1
+               js = (jb - 1) / super + 1
+               if (sstate(is, js) == 0) then
+                  sstate(is, js) = 1
+                  if (sum((sp%sc(:, is, js) - d)**2) >= (rb + sp%sr(is, js))**2) then
+                     sstate(is, js) = 2
+                  else if (pruned) then
+                     if (ball_beyond(sq%bounds, matmul(m, sp%sc(:, is, js)) + t, sp%sr(is, js) * sa / sb)) sstate(is, js) = 2
+                  end if
+               end if
+               if (sstate(is, js) == 2) cycle
                if (sum((sp%bc(:, ib, jb) - d)**2) >= (rb + sp%br(ib, jb))**2) cycle
                if (pruned) then
-                  if (beyond(sq, matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
+                  if (ball_beyond(sq%bounds, matmul(m, sp%bc(:, ib, jb)) + t, sp%br(ib, jb) * sa / sb)) cycle
                end if
-               do j = (jb - 1) * block + 1, min(sp%np, jb * block)
-                  do i = (ib - 1) * block + 1, min(sp%nt, ib * block)
-                     x = sp%x(:, i, j)
-                     if (sum((x - d)**2) >= rb2) cycle
-                     y = matmul(m, x) + t
-                     ly = norm2(y)
-                     ! r_B cannot reach this point deeper than the depth found so far
-                     if (pruned .and. ly > 0.0_wp) then
-                        if (direction_bound(sq, y, ly) - ly <= depth / sb) cycle
-                     end if
-                     if (ly == 0.0_wp) then
-                        depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
-                     else
-                        depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
-                     end if
-                  end do
+               do i = 1, block * block
+                  x = sp%xb(:, i, ib, jb)
+                  if (sum((x - d)**2) >= rb2) cycle
+                  y = matmul(m, x) + t
+                  ly = norm2(y)
+                  ! r_B cannot reach this point deeper than the depth found so far
+                  if (pruned .and. ly > 0.0_wp) then
+                     if (bound_at(sq%bounds, y) - ly <= depth / sb) cycle
+                  end if
+                  if (ly == 0.0_wp) then
+                     depth = max(depth, sb * sq%s%radius_dir([0.0_wp, 0.0_wp, 1.0_wp]))
+                  else
+                     depth = max(depth, sb * (sq%s%radius_dir(y / ly) - ly))
+                  end if
                end do
             end do
          end do
@@ -480,7 +506,7 @@ contains
    end function wall_depth
 
    !> Memory (bytes) verify_model needs at `resolution`: per distinct (shape, order) pair the
-   !> 2 resolution**2 sampled surface points and their block bounds, plus per particle the model
+   !> 2 resolution**2 sampled surface points, their blocks and the cube-map bounds of r, plus per particle the model
    !> (about 120 bytes), its key, bounding radius, wrapped centre and cell-list record, and the
    !> read's temporary rotation (about 320 bytes in all, rounded up); with the certified
    !> filter (default) also one contact body (about 4.5 MB) per pair.
@@ -502,33 +528,14 @@ contains
          seen(model%shape(p), model%nmax(p)) = .true.
       end do
       nkey = count(seen)
-      bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (24.0_wp + 40.0_wp / block**2) &
-              + real(model%np, wp) * 320.0_wp
+      bytes = 16.0e6_wp + real(nkey, wp) * 2.0_wp * real(resolution, wp)**2 * (48.0_wp + 32.0_wp / block**2) &
+              + real(nkey, wp) * 48.0_wp * real(max_bound_cells + 1, wp)**2 + real(model%np, wp) * 320.0_wp
       if (.not. present(filter)) then
          bytes = bytes + real(nkey, wp) * 5.0e6_wp
       else if (filter) then
          bytes = bytes + real(nkey, wp) * 5.0e6_wp
       end if
    end function verify_memory
-
-   !> True when no point of the ball (c, r) (B's body frame, shape units) can lie inside B: the
-   !> ball is farther from B's centre than B's radius bound over every block its cap touches.
-   pure logical function beyond(sq, c, r) result(out)
-      type(sampled_type), intent(in) :: sq
-      real(wp), intent(in) :: c(3), r
-      real(wp) :: bound
-      integer :: ib0, ib1, jb0, jb1, ib, jb
-      out = .false.
-      if (norm2(c) <= r) return
-      call cap_blocks(sq, c, r, ib0, ib1, jb0, jb1)
-      bound = 0.0_wp
-      do jb = jb0, jb1
-         do ib = ib0, ib1
-            bound = max(bound, sq%bmax(ib, 1 + modulo(jb - 1, sq%nbp)))
-         end do
-      end do
-      out = norm2(c) - r >= bound
-   end function beyond
 
    !> The blocks whose directions meet the cap of directions of the ball (c, r) seen from the
    !> origin: rows ib0..ib1, columns jb0..jb1 (columns modulo nbp; every block when the ball holds
@@ -568,20 +575,6 @@ contains
       end if
    end subroutine cap_blocks
 
-   !> The bound of r over the block of directions holding y (|y| = ly > 0).
-   pure real(wp) function direction_bound(sq, y, ly) result(bound)
-      type(sampled_type), intent(in) :: sq
-      real(wp), intent(in) :: y(3), ly
-      real(wp) :: th, ph
-      integer :: ib, jb
-      th = acos(max(-1.0_wp, min(1.0_wp, y(3) / ly)))
-      ph = atan2(y(2), y(1))
-      if (ph < 0.0_wp) ph = ph + 2.0_wp * pi
-      ib = min(sq%nbt, max(1, floor(th / (block * pi / sq%nt)) + 1))
-      jb = min(sq%nbp, max(1, floor(ph / (block * 2.0_wp * pi / sq%np)) + 1))
-      bound = sq%bmax(ib, jb)
-   end function direction_bound
-
    subroutine sample_shape(shape, order, resolution, samp)
       type(sh_expansion_type), intent(in) :: shape
       integer, intent(in) :: order, resolution
@@ -608,7 +601,8 @@ contains
       samp%rmax = 1.02_wp * samp%rmax
       samp%nbt = (samp%nt + block - 1) / block
       samp%nbp = (samp%np + block - 1) / block
-      allocate (samp%bc(3, samp%nbt, samp%nbp), samp%br(samp%nbt, samp%nbp))
+      allocate (samp%bc(3, samp%nbt, samp%nbp), samp%br(samp%nbt, samp%nbp), &
+                samp%xb(3, block * block, samp%nbt, samp%nbp))
       do jb = 1, samp%nbp
          do ib = 1, samp%nbt
             associate (pts => samp%x(:, (ib - 1) * block + 1:min(samp%nt, ib * block), &
@@ -622,22 +616,31 @@ contains
                end do
                samp%bc(:, ib, jb) = c
                samp%br(ib, jb) = rr
+               samp%xb(:, :, ib, jb) = spread(pts(:, 1, 1), 2, block * block)
+               samp%xb(:, :size(pts, 2) * size(pts, 3), ib, jb) = reshape(pts, [3, size(pts, 2) * size(pts, 3)])
             end associate
          end do
       end do
-      ! bound of r over the directions of a block: its samples and a one-sample border, with the
-      ! margin of the bounding radius
-      allocate (samp%bmax(samp%nbt, samp%nbp))
-      do jb = 1, samp%nbp
-         do ib = 1, samp%nbt
-            rr = 0.0_wp
-            do j = (jb - 1) * block, jb * block + 1
-               do i = max(1, (ib - 1) * block), min(samp%nt, ib * block + 1)
-                  rr = max(rr, norm2(samp%x(:, i, 1 + modulo(j - 1, samp%np))))
+      samp%nst = (samp%nbt + super - 1) / super
+      samp%nsp = (samp%nbp + super - 1) / super
+      allocate (samp%sc(3, samp%nst, samp%nsp), samp%sr(samp%nst, samp%nsp))
+      do jb = 1, samp%nsp
+         do ib = 1, samp%nst
+            associate (pts => samp%x(:, (ib - 1) * block * super + 1:min(samp%nt, ib * block * super), &
+                                     (jb - 1) * block * super + 1:min(samp%np, jb * block * super)))
+               c = sum(sum(pts, dim=3), dim=2) / real(size(pts, 2) * size(pts, 3), wp)
+               rr = 0.0_wp
+               do j = 1, size(pts, 3)
+                  do i = 1, size(pts, 2)
+                     rr = max(rr, norm2(pts(:, i, j) - c))
+                  end do
                end do
-            end do
-            samp%bmax(ib, jb) = 1.02_wp * rr
+               samp%sc(:, ib, jb) = c
+               samp%sr(ib, jb) = rr
+            end associate
          end do
       end do
+      call new_radius_bounds(samp%bounds, samp%s, bound_slack)
+      samp%rmax = max(samp%rmax, samp%bounds%umax)
    end subroutine sample_shape
 end module anm_audit_verify
