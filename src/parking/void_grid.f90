@@ -21,6 +21,7 @@
 !>     call vg%compact()                    ! rebuild the list of free cells (serial)
 !>     x = vg%draw(u1, u2, u3, u4)          ! a uniform point of a uniformly drawn free cell
 module anm_parking_void_grid
+   use, intrinsic :: iso_fortran_env, only: int8
    use anm_core_kinds, only: wp, i8, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type
    use anm_contact_body, only: contact_body_type, stored_level, patch_rows, patch_cols, patch_bounds
@@ -48,8 +49,9 @@ module anm_parking_void_grid
       real(wp) :: h(3) = 1.0_wp
       !> Inscribed radius of the current sieve's particles (mm).
       real(wp) :: r_in = 0.0_wp
-      !> Blocked flag per cell.
-      logical, allocatable :: blocked(:)
+      !> Blocked flag per cell (one byte each: the grid has up to 2^24 cells, and every attempt
+      !> reads one flag at random).
+      logical(int8), allocatable :: blocked(:)
       !> Free cells (indices into blocked), nfree of them.
       integer, allocatable :: free(:)
       !> Number of free cells listed.
