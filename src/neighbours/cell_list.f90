@@ -39,9 +39,6 @@ module anm_neighbours_cell_list
    public :: cell_list_type, new_cell_list
 
    integer, parameter :: max_cells_per_level = 2**24
-   !> Relative margin (of the cell edge) by which a cell's box may miss a query before it is
-   !> skipped: covers the rounding of the cell a centre was filed in.
-   real(wp), parameter :: cell_pad = 1.0e-6_wp
    !> Records per block.
    integer, parameter :: block_size = 3
 
@@ -358,9 +355,9 @@ contains
       !> Only ids up to jmax count.
       integer, intent(in), optional :: jmax
       integer :: k, lo(3), hi(3), own(3), side(3), na(3), nb(3), t1, t2, t3, i1, i2, i3, c1, c2, c3
-      integer :: cell, s1, s2, s3, d3, b, m, j0, j1, id, row, plane
-      real(wp) :: reach, d(3), e(3), sh(3), csh(3), lim, half(3), qin, rr, r2, reach2, g2, g3, g23, gap
-      logical :: level_images, full(3), anyfull, use_in, prune(3)
+      integer :: cell, s1, s2, s3, d3, b, m, j0, j1
+      real(wp) :: reach, d(3), e(3), sh(3), csh(3), lim, half(3), qin, rr, r2
+      logical :: level_images, full(3), anyfull, use_in
       ncand = 0
       hit = .false.
       if (.not. allocated(cand)) allocate (cand(64), shift(3, 64))
@@ -385,44 +382,24 @@ contains
                na(d3) = merge(hi(d3) - own(d3), own(d3) - lo(d3), side(d3) > 0)
                nb(d3) = hi(d3) - lo(d3) - na(d3)
             end do
-            ! a cell whose box lies farther than reach from the centre holds no candidate: cells
-            ! are skipped by their distance along each edge (not along edges whose whole range is
-            ! visited, where the nearest image decides, nor when every image is searched)
-            prune = .not. (full .or. level_images)
-            reach2 = (reach + cell_pad * maxval(lv%h))**2
             do t3 = 0, hi(3) - lo(3)
                i3 = zigzag(t3, own(3), side(3), na(3), nb(3))
-               g3 = 0.0_wp
-               if (prune(3)) then
-                  g3 = axis_gap(center(3), i3, lv%h(3), lv%n(3), self%periodic)**2
-                  if (g3 > reach2) cycle
-               end if
-               call wrap_shift(i3, lv%n(3), self%box(3), c3, csh(3))
-               plane = lv%n(2) * c3
+               c3 = wrap_index(i3, lv%n(3))
+               csh(3) = real((i3 - c3) / lv%n(3), wp) * self%box(3)
                do t2 = 0, hi(2) - lo(2)
                   i2 = zigzag(t2, own(2), side(2), na(2), nb(2))
-                  g23 = g3
-                  if (prune(2)) then
-                     g2 = axis_gap(center(2), i2, lv%h(2), lv%n(2), self%periodic)**2
-                     g23 = g3 + g2
-                     if (g23 > reach2) cycle
-                  end if
-                  call wrap_shift(i2, lv%n(2), self%box(2), c2, csh(2))
-                  row = 1 + lv%n(1) * (c2 + plane)
+                  c2 = wrap_index(i2, lv%n(2))
+                  csh(2) = real((i2 - c2) / lv%n(2), wp) * self%box(2)
                   do t1 = 0, hi(1) - lo(1)
                      i1 = zigzag(t1, own(1), side(1), na(1), nb(1))
-                     if (prune(1)) then
-                        gap = axis_gap(center(1), i1, lv%h(1), lv%n(1), self%periodic)
-                        if (g23 + gap * gap > reach2) cycle
-                     end if
-                     call wrap_shift(i1, lv%n(1), self%box(1), c1, csh(1))
-                     cell = row + c1
+                     c1 = wrap_index(i1, lv%n(1))
+                     csh(1) = real((i1 - c1) / lv%n(1), wp) * self%box(1)
+                     cell = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
                      b = lv%head(cell)
                      do while (b > 0)
                         associate (bk => self%blocks(b))
                            do m = 1, bk%n
-                              id = bk%r(m)%id
-                              if (id <= j0 .or. id > j1) cycle
+                              if (bk%r(m)%id <= j0 .or. bk%r(m)%id > j1) cycle
                               lim = rho + real(bk%r(m)%rho, wp)
                               rr = qin + real(bk%r(m)%rin, wp)
                               if (level_images) then
@@ -437,7 +414,7 @@ contains
                                              hit = .true.
                                              return
                                           end if
-                                          call push(cand, shift, ncand, id, sh)
+                                          call push(cand, shift, ncand, bk%r(m)%id, sh)
                                        end do
                                     end do
                                  end do
@@ -459,7 +436,7 @@ contains
                                  hit = .true.
                                  return
                               end if
-                              call push(cand, shift, ncand, id, sh)
+                              call push(cand, shift, ncand, bk%r(m)%id, sh)
                            end do
                            b = bk%next
                         end associate
@@ -510,42 +487,6 @@ contains
          i = own + merge(s, -s, a > b) * (t - mn)
       end if
    end function zigzag
-
-   !> Distance along one edge from x to the slab of cell i (unwrapped index; in a walled box the
-   !> first and last cells reach to infinity, since centres outside the box are clamped into them).
-   pure real(wp) function axis_gap(x, i, h, n, periodic) result(g)
-      real(wp), intent(in) :: x, h
-      integer, intent(in) :: i, n
-      logical, intent(in) :: periodic
-      real(wp) :: a, b
-      a = i * h
-      b = a + h
-      g = 0.0_wp
-      if (x < a) then
-         if (periodic .or. i > 0) g = a - x
-      else if (x > b) then
-         if (periodic .or. i < n - 1) g = x - b
-      end if
-   end function axis_gap
-
-   !> Cell index i (in -n..2n-1) wrapped into c (0..n-1), and the shift (0 or +-L) of the image
-   !> of cell c that lies at i.
-   pure subroutine wrap_shift(i, n, length, c, sh)
-      integer, intent(in) :: i, n
-      real(wp), intent(in) :: length
-      integer, intent(out) :: c
-      real(wp), intent(out) :: sh
-      if (i < 0) then
-         c = wrap_index(i, n)
-         sh = real((i - c) / n, wp) * length
-      else if (i >= n) then
-         c = wrap_index(i, n)
-         sh = real((i - c) / n, wp) * length
-      else
-         c = i
-         sh = 0.0_wp
-      end if
-   end subroutine wrap_shift
 
    !> Shift (0 or +-L) that brings a displacement d, |d| < L, to the nearest image.
    elemental real(wp) function nearest_shift(d, half, length) result(sh)
