@@ -44,7 +44,7 @@ module anm_contact_overlap
    private
 
    public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
-      & point_inside, sector_range, boxes_disjoint
+      & point_inside, sector_range, boxes_disjoint, cap_bounds, cap_outside, cap_inside
 
    !> Contact methods.
    type :: contact_method_enum
@@ -129,6 +129,9 @@ module anm_contact_overlap
    end type b_node_type
 
    integer, parameter :: code_none = -1, code_outside = 0, code_inside = 1, code_mixed = 2
+   !> Answers of `cap_bounds` for its callers: the radial range lies beyond the surface over the whole
+   !> cap (outside), or below it (inside); any other answer decides nothing.
+   integer, parameter :: cap_outside = code_outside, cap_inside = code_inside
    !> Largest number of probed leaf patches of A remembered by the box traversal.
    integer, parameter :: max_leaves = 256
    !> Outcome of the box traversal: no contact (certain), contact found, undecided.
@@ -544,9 +547,14 @@ contains
    !> range phi(u) +- asin(sin beta / sin theta(u)) (all azimuths when the cap holds a pole). The
    !> level is the finest stored one with patches of at least beta (coarser when near a pole the
    !> rectangle would be large); a mixed answer is retried once on the next finer level.
+   !> `cap_outside`: r < lo over the whole cap; `cap_inside`: r > hi over it (certified patch bounds).
    pure function cap_bounds(b, u, sinb, beta, lo, hi) result(code)
+      !> Body.
       type(contact_body_type), intent(in) :: b
-      real(wp), intent(in) :: u(3), sinb, beta, lo, hi
+      !> Cap axis (unit, body frame), sine of its half-angle and half-angle (rad).
+      real(wp), intent(in) :: u(3), sinb, beta
+      !> Radial range (shape units).
+      real(wp), intent(in) :: lo, hi
       integer :: code
       integer, parameter :: max_count = 36
       real(wp), parameter :: eps = 1.0e-12_wp

@@ -91,6 +91,8 @@ module anm_parking_packing
    !> Capacity beyond which the particle arrays grow by half instead of doubling (the last growth
    !> then leaves at most a third of the arrays unused).
    integer, parameter :: gentle_growth = 2**20
+   !> Longest candidate list that `fits` sorts by likely overlap (`likely_first`).
+   integer, parameter :: max_sorted = 64
 
 contains
 
@@ -296,8 +298,8 @@ contains
       integer, intent(in), optional :: exclude
       integer :: i, j, ncand, ii, jmin, jskip
       real(wp) :: xj(3)
-      logical :: hit
-      integer, allocatable :: order(:)
+      logical :: hit, sorted
+      integer :: order(max_sorted)
       ok = .false.
       jmin = 0
       if (present(since)) jmin = since
@@ -320,9 +322,10 @@ contains
             call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, jmin=jmin)
          end if
          call live_candidates(self, scratch%cand, scratch%shift, ncand)
-         call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order)
+         call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order, sorted)
          do ii = 1, ncand
-            i = order(ii)
+            i = ii
+            if (sorted) i = order(ii)
             j = scratch%cand(i)
             if (j == jskip) then
                if (all(scratch%shift(:, i) == 0.0_wp)) cycle
@@ -364,22 +367,23 @@ contains
    !> The order in which to test the candidates: the most likely overlaps first, so that an
    !> attempt that fails usually fails at its first exact test. The key is where the centre
    !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1).
-   !> Short lists are sorted (insertion sort, stable); long ones are kept in their order.
-   pure subroutine likely_first(self, kn, x, sc, cnd, shf, ncand, order)
+   !> Short lists are sorted (insertion sort, stable: `sorted`, order(1:ncand)); long ones are kept
+   !> in their order (`sorted` false, order not set).
+   pure subroutine likely_first(self, kn, x, sc, cnd, shf, ncand, order, sorted)
       type(packing_type), intent(in) :: self
       integer, intent(in) :: kn, ncand
       real(wp), intent(in) :: x(3), sc
       integer, intent(in) :: cnd(:)
       real(wp), intent(in) :: shf(:, :)
-      integer, allocatable, intent(out) :: order(:)
-      integer, parameter :: max_sorted = 64
+      integer, intent(inout) :: order(max_sorted)
+      logical, intent(out) :: sorted
       real(wp) :: key(max_sorted), kk, r_in, r_out
       integer :: i, m, j, oi
-      allocate (order(ncand))
+      sorted = ncand >= 2 .and. ncand <= max_sorted
+      if (.not. sorted) return
       do i = 1, ncand
          order(i) = i
       end do
-      if (ncand < 2 .or. ncand > max_sorted) return
       do i = 1, ncand
          j = cnd(i)
          r_in = sc * self%kinds(kn)%r_in_query + self%scale(j) * self%kinds(self%kind_of(j))%r_in_parked

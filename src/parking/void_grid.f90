@@ -21,9 +21,11 @@
 !>     call vg%compact()                    ! rebuild the list of free cells (serial)
 !>     x = vg%draw(u1, u2, u3, u4)          ! a uniform point of a uniformly drawn free cell
 module anm_parking_void_grid
+   use, intrinsic :: iso_fortran_env, only: int8
    use anm_core_kinds, only: wp, i8, pi, two_pi
    use anm_sh_expansion, only: sh_expansion_type
    use anm_contact_body, only: contact_body_type, stored_level, patch_rows, patch_cols, patch_bounds
+   use anm_contact_overlap, only: cap_bounds, cap_outside, cap_inside
    implicit none
    private
 
@@ -31,6 +33,9 @@ module anm_parking_void_grid
 
    !> Answers of `bound_decision`.
    integer, parameter :: undecided = 0, decided_in = 1, decided_out = 2
+   !> Edge (cells) of the tiles that `block_particle` decides at once where it can; a tile not
+   !> looked at yet.
+   integer, parameter :: tile = 4, not_looked = -1
 
    !> The occupancy grid.
    type :: void_grid_type
@@ -44,8 +49,9 @@ module anm_parking_void_grid
       real(wp) :: h(3) = 1.0_wp
       !> Inscribed radius of the current sieve's particles (mm).
       real(wp) :: r_in = 0.0_wp
-      !> Blocked flag per cell.
-      logical, allocatable :: blocked(:)
+      !> Blocked flag per cell (one byte each: the grid has up to 2^24 cells, and every attempt
+      !> reads one flag at random).
+      logical(int8), allocatable :: blocked(:)
       !> Free cells (indices into blocked), nfree of them.
       integer, allocatable :: free(:)
       !> Number of free cells listed.
@@ -126,9 +132,10 @@ contains
       real(wp), intent(in) :: rho_in, rho_out
       !> Contact body of `shape` (its stored bounds decide most cells without evaluating r).
       type(contact_body_type), intent(in), optional :: body
-      real(wp) :: hd, m, reach, x(3), d(3), y(3), ly, ball, off
-      integer :: lo(3), hi(3), i1, i2, i3, c(3), cell, code
+      real(wp) :: hd, m, reach, x(3), d(3), y(3), ly, ball, off, r2max, q2, q3, w
+      integer :: lo(3), hi(3), i1, i2, i3, c1, c2, c3, cell, code, a1, b1, row, nt(3), t1, t2, t3, tt
       logical :: bounds
+      integer, allocatable :: tcode(:)
       hd = 0.5_wp * norm2(self%h)
       m = self%r_in - hd
       ball = rho_in + self%r_in - hd
@@ -143,11 +150,37 @@ contains
          lo = max(lo, 0)
          hi = min(hi, self%n - 1)
       end if
+      ! tiles of tile^3 cells (from lo) decided at once by the body's bounds over the cap of their
+      ! directions, when the first of their cells needs a decision
+      if (bounds .and. m > 0.0_wp) then
+         nt = (hi - lo) / tile + 1
+         allocate (tcode(product(nt)))
+         tcode = not_looked
+      end if
+      ! a cell is blocked only when its centre lies within max(ball, reach) of the particle's
+      ! centre (the tests below): cells, rows and planes beyond that (with a margin for the
+      ! rounding of the sums) are skipped before any work
+      r2max = ball * abs(ball)
+      if (m > 0.0_wp) r2max = max(r2max, reach**2)
+      r2max = r2max * (1.0_wp + 1.0e-9_wp)
       do i3 = lo(3), hi(3)
+         q3 = (((i3 + 0.5_wp) * self%h(3)) - center(3))**2
+         if (q3 > r2max) cycle
+         c3 = modulo(i3, self%n(3))
          do i2 = lo(2), hi(2)
-            do i1 = lo(1), hi(1)
-               c = modulo([i1, i2, i3], self%n)
-               cell = 1 + c(1) + self%n(1) * (c(2) + self%n(2) * c(3))
+            q2 = q3 + (((i2 + 0.5_wp) * self%h(2)) - center(2))**2
+            if (q2 > r2max) cycle
+            c2 = modulo(i2, self%n(2))
+            row = 1 + self%n(1) * (c2 + self%n(2) * c3)
+            ! the cells of this row within reach, one more on each side
+            w = sqrt(r2max - q2)
+            a1 = max(lo(1), floor((center(1) - w) / self%h(1)) - 1)
+            b1 = min(hi(1), floor((center(1) + w) / self%h(1)) + 1)
+            c1 = modulo(a1, self%n(1)) - 1
+            do i1 = a1, b1
+               c1 = c1 + 1
+               if (c1 == self%n(1)) c1 = 0
+               cell = row + c1
                if (self%blocked(cell)) cycle
                x = ([i1, i2, i3] + 0.5_wp) * self%h
                d = x - center
@@ -158,6 +191,22 @@ contains
                end if
                if (m <= 0.0_wp) cycle
                if (sum(d**2) > reach**2) cycle
+               if (bounds) then
+                  t1 = (i1 - lo(1)) / tile
+                  t2 = (i2 - lo(2)) / tile
+                  t3 = (i3 - lo(3)) / tile
+                  tt = 1 + t1 + nt(1) * (t2 + nt(2) * t3)
+                  if (tcode(tt) == not_looked) then
+                     tcode(tt) = tile_decision(body, center, rot, scale, self%h, off, lo + tile * [t1, t2, t3], &
+                                               min(hi, lo + tile * [t1, t2, t3] + tile - 1))
+                  end if
+                  if (tcode(tt) == decided_out) cycle
+                  if (tcode(tt) == decided_in) then
+                     self%blocked(cell) = .true.
+                     self%stale = self%stale + 1
+                     cycle
+                  end if
+               end if
                y = matmul(d, rot) / scale
                ly = norm2(y)
                if (ly == 0.0_wp) then
@@ -182,6 +231,35 @@ contains
          end do
       end do
    end subroutine block_particle
+
+   !> The decision for every cell centre of the tile of cells a..b (unwrapped indices) of a particle
+   !> (centre, rotation, scale): `decided_out` when every centre y (body frame) has |y| - off above
+   !> r(y/|y|) for sure, `decided_in` when below for sure (the certified bounds of r over the cap of
+   !> directions that holds the tile, with bound_decision's margin), else `undecided`.
+   pure integer function tile_decision(body, center, rot, scale, h, off, a, b) result(code)
+      type(contact_body_type), intent(in) :: body
+      real(wp), intent(in) :: center(3), rot(3, 3), scale, h(3), off
+      integer, intent(in) :: a(3), b(3)
+      real(wp), parameter :: rel = 1.0e-12_wp
+      real(wp) :: xlo(3), xhi(3), yc(3), lc, rt, sinb, margin, tlo, thi
+      code = undecided
+      xlo = (a + 0.5_wp) * h
+      xhi = (b + 0.5_wp) * h
+      yc = matmul(0.5_wp * (xlo + xhi) - center, rot) / scale
+      lc = norm2(yc)
+      rt = 0.5_wp * norm2(xhi - xlo) / scale * (1.0_wp + rel)
+      if (lc <= 2.0_wp * rt) return
+      sinb = rt / lc * (1.0_wp + rel)
+      margin = 1.0e-9_wp * body%r_max
+      tlo = (lc - rt) * (1.0_wp - rel) - off
+      thi = (lc + rt) * (1.0_wp + rel) - off
+      select case (cap_bounds(body, yc / lc, sinb, asin(sinb) * (1.0_wp + rel), tlo - margin, thi + margin))
+      case (cap_outside)
+         code = decided_out
+      case (cap_inside)
+         code = decided_in
+      end select
+   end function tile_decision
 
    !> Whether the certified bounds of r over the stored patch holding the unit direction u decide
    !> the test t <= r(u): `decided_in` (r(u) >= t for sure), `decided_out` (r(u) < t for sure) or
