@@ -11,13 +11,16 @@ Usage (from the repository root; `bash scripts/benchmarks.sh` installs and build
     python3 bench/run_all.py [--out docs/performance.md] [--skip NAME ...] [--only NAME ...]
 
 NAME is one of: sh, shells, contact, default, msand, table23, rsa, million, slicing, verify,
-shellsmm, finesieves, ten_million (verify: `anm verify` of M_sand against its parking; shellsmm:
+shellsmm, finesieves, ten_million, dense (verify: `anm verify` of M_sand against its parking; shellsmm:
 `inputs/shells_mm.nml`, its first sieve alone (start-up) without and with a warm kind cache, the
 whole job with shells (no cache, warm cache) and without shells, the kinds' memory; finesieves:
 `inputs/concrete.nml` with `strategy = 'rsa'`, attempts per second (wall and CPU) of each sieve,
 the three finest being the dense-regime figure; `--concrete-box L` runs it in an L mm box instead
 of 40 mm for a quicker look; all beside the reference loop's time in the same run). Every job runs
 with ANM_CACHE=off unless it tests the cache.
+dense: `inputs/concrete.nml` and `inputs/concrete_mould.nml` (dense strategy, 0.70 asked, about 10
+minutes each), fractions per sieve, wall and CPU time, peak memory and `anm verify`, beside the
+reference loop's time in the same run.
 ten_million: `inputs/ten_million.nml`, 10^7 sand grains, parking and `anm verify` with CPU time,
 wall time and peak memory of each, about 10 minutes on 2 quiet cores and 1.2 GB of disk for the
 model, beside the reference loop's time in the same run.
@@ -46,7 +49,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
 SHAPES = SHARED / "shapes"
 ALL = ("sh", "shells", "contact", "default", "msand", "table23", "rsa", "million", "slicing", "verify", "shellsmm",
-       "finesieves", "ten_million")
+       "finesieves", "ten_million", "dense")
 
 
 @dataclass
@@ -368,6 +371,37 @@ def verify_section(rep: Report, anm: str, tmp: Path) -> None:
                               + v.stdout.strip() + "\n" + ref_text + "\n" + ref2))
 
 
+def dense_section(rep: Report, anm: str, tmp: Path) -> None:
+    """inputs/concrete.nml and inputs/concrete_mould.nml (`strategy = 'dense'`, 0.70 asked, the
+    time limit of the namelist): total and per-sieve fractions reached, wall and CPU time, peak
+    memory and `anm verify`, between two runs of the reference loop (issue 14's target: 0.70, every
+    sieve within 2 %, at most 10 minutes on 2 cores)."""
+    title = "Dense concrete (`inputs/concrete.nml`, `inputs/concrete_mould.nml`)"
+    if not SHAPES.is_dir():
+        rep.sections.append(f"### {title}\n\nnot run: ../shared/shapes missing\n")
+        return
+    ref_text, _ = reference_loop(tmp)
+    lines = []
+    for name in ("concrete", "concrete_mould"):
+        job = park(anm, ROOT / "inputs" / f"{name}.nml", tmp, name, 2)
+        r = job.run
+        worst = max((abs(a - t) / t for _, t, a, _ in job.sieves if t > 0), default=float("nan"))
+        met = (job.particles > 0 and job.total >= 0.70 - 1e-4 and worst <= 0.02 and r.wall <= 600
+               and job.verify_ok)
+        rep.target(f"dense `inputs/{name}.nml`, 2 threads", f"PD {job.total:.4f} of 0.70 in {r.wall:.0f} s "
+                   f"({r.cpu:.0f} s CPU), worst sieve {100 * worst:.1f} % off, verify "
+                   f"{'OK' if job.verify_ok else 'not OK'}", "0.70, every sieve within 2 %, <= 10 min", met)
+        lines.append(f"{name}: {r.wall:.1f} s wall, {r.cpu:.1f} s CPU, {r.peak_mb:.0f} MB peak, "
+                     f"{job.particles:,} particles, PD {job.total:.4f} of {job.total_target:.4f}, verify {job.verify}")
+        lines += [f"  sieve {i}: {a:.5f} of {t:.5f} ({n:,} particles)" for i, t, a, n in job.sieves]
+        if job.model:
+            job.model.unlink(missing_ok=True)
+    ref2, _ = reference_loop(tmp)
+    rep.sections.append(block(title, "OMP_NUM_THREADS=2 anm run inputs/concrete.nml; "
+                              "OMP_NUM_THREADS=2 anm run inputs/concrete_mould.nml (each then anm verify)",
+                              "\n".join(lines) + "\n" + ref_text + "\n" + ref2))
+
+
 def ten_million_section(rep: Report, anm: str, tmp: Path) -> None:
     """inputs/ten_million.nml (10^7 sand grains): parking, then `anm verify` of the model, each with
     CPU time, wall time and peak memory, between two runs of the reference loop."""
@@ -642,6 +676,8 @@ def main() -> int:
         if "finesieves" in which:
             print("== finesieves", file=sys.stderr)
             finesieves_section(rep, args.anm, tmp, args.concrete_box)
+        if "dense" in which:
+            dense_section(rep, args.anm, tmp)
         if "ten_million" in which:
             print("== ten_million", file=sys.stderr)
             ten_million_section(rep, args.anm, tmp)
