@@ -607,13 +607,7 @@ contains
          do ib = 1, samp%nbt
             associate (pts => samp%x(:, (ib - 1) * block + 1:min(samp%nt, ib * block), &
                                      (jb - 1) * block + 1:min(samp%np, jb * block)))
-               c = sum(sum(pts, dim=3), dim=2) / real(size(pts, 2) * size(pts, 3), wp)
-               rr = 0.0_wp
-               do j = 1, size(pts, 3)
-                  do i = 1, size(pts, 2)
-                     rr = max(rr, norm2(pts(:, i, j) - c))
-                  end do
-               end do
+               call centred_ball(pts, c, rr)
                samp%bc(:, ib, jb) = c
                samp%br(ib, jb) = rr
                samp%xb(:, :, ib, jb) = spread(pts(:, 1, 1), 2, block * block)
@@ -628,13 +622,7 @@ contains
          do ib = 1, samp%nst
             associate (pts => samp%x(:, (ib - 1) * block * super + 1:min(samp%nt, ib * block * super), &
                                      (jb - 1) * block * super + 1:min(samp%np, jb * block * super)))
-               c = sum(sum(pts, dim=3), dim=2) / real(size(pts, 2) * size(pts, 3), wp)
-               rr = 0.0_wp
-               do j = 1, size(pts, 3)
-                  do i = 1, size(pts, 2)
-                     rr = max(rr, norm2(pts(:, i, j) - c))
-                  end do
-               end do
+               call centred_ball(pts, c, rr)
                samp%sc(:, ib, jb) = c
                samp%sr(ib, jb) = rr
             end associate
@@ -643,4 +631,18 @@ contains
       call new_radius_bounds(samp%bounds, samp%s, bound_slack)
       samp%rmax = max(samp%rmax, samp%bounds%umax)
    end subroutine sample_shape
+
+   !> The ball about the mean c of the points pts(3, :, :) that holds them all (radius rr).
+   pure subroutine centred_ball(pts, c, rr)
+      real(wp), intent(in) :: pts(:, :, :)
+      real(wp), intent(out) :: c(3), rr
+      integer :: i, j
+      c = sum(sum(pts, dim=3), dim=2) / real(size(pts, 2) * size(pts, 3), wp)
+      rr = 0.0_wp
+      do j = 1, size(pts, 3)
+         do i = 1, size(pts, 2)
+            rr = max(rr, norm2(pts(:, i, j) - c))
+         end do
+      end do
+   end subroutine centred_ball
 end module anm_audit_verify
