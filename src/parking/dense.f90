@@ -377,10 +377,10 @@ contains
       end if
       s0 = 1
       if (present(first_sieve)) s0 = first_sieve
-      act = pack([(i, i=1, np)], pk%sieve(:np) >= s0)
       if (present(near_short)) then
          if (near_short) act = growth_set(pk, tg, s0)
       end if
+      if (.not. allocated(act)) act = pack([(i, i=1, np)], pk%sieve(:np) >= s0)
       na = size(act)
       nb = dp%batch
       if (nb <= 0) nb = 32 * max(1, dp%nthreads)
