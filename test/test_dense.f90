@@ -32,9 +32,9 @@ contains
               new_unittest("moves never overlap: spheres, periodic, brute force after every sweep", test_spheres_periodic), &
               new_unittest("moves never overlap: spheres, walls, brute force after every sweep", test_spheres_walls), &
               new_unittest("moves never overlap: ellipsoids, all pairs certified after every sweep", test_ellipsoids), &
-              new_unittest("growth to contact never overlaps: spheres, periodic, brute force after every sweep", &
+              new_unittest("growth never overlaps: spheres, periodic, brute force after every sweep", &
                            test_growth_periodic), &
-              new_unittest("growth to contact never overlaps: spheres, walls, brute force after every sweep", &
+              new_unittest("growth never overlaps: spheres, walls, brute force after every sweep", &
                            test_growth_walls), &
               new_unittest("moves randomise aligned ellipsoids: orientation eigenvalues 1/3", test_isotropy), &
               new_unittest("dense spheres pass the RSA jamming limit 0.3841 and verify", test_beyond_rsa), &
@@ -147,7 +147,7 @@ contains
       call check(error, nmoved > pk%np / 2, "most spheres did not move")
    end subroutine sphere_sweeps
 
-   !> Growth to contact never overlaps: unit spheres with targets of radius 1.4 (periodic or
+   !> Growth never overlaps: unit spheres with targets of radius 1.4 (periodic or
    !> walled box), only the growing spheres and their neighbours moving; exact gaps of all pairs
    !> after every sweep.
    subroutine growth_sweeps(error, periodic)

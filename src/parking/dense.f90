@@ -9,7 +9,9 @@
 !> when `fits` finds no overlap with any other particle (the shell mode's bodies) and no wall
 !> crossing: no overlap ever exists. The sizes d and a are per sieve, tuned after every sweep
 !> towards the target acceptance (HOOMD-blue's scale solver: x (acc + 1) / (target + 1), within
-!> x/2 .. 2x) from integer counts.
+!> x/2 .. 2x) from integer counts. With growth, a particle below its target scale spends half of its
+!> trials on growth: the scale min(target, scale (1 + g)) at the same pose, g per sieve tuned like
+!> the steps (within 0.5).
 !>
 !> Determinism: sweep k moves particles 1..np in id order (ids are stable: the strategy only adds);
 !> the trial of particle i in sweep k draws from its own stream (seed xor salt, k 2^32 + i).
@@ -43,8 +45,8 @@ module anm_parking_dense
    real(wp), parameter :: max_angle = 1.0_wp, max_step = 0.25_wp
    !> Relative shortfall of a sieve below which no further dense round starts (0.5 %).
    real(wp), parameter :: round_tolerance = 0.005_wp
-   !> Halvings of a growth trial's bisection between the current and the target scale.
-   integer, parameter :: growth_bisections = 4
+   !> Largest growth step of a growth trial (relative to the particle's scale).
+   real(wp), parameter :: max_growth = 0.5_wp
 
    !> What the strategy needs of the run besides the RSA parameters.
    type :: dense_params_type
@@ -67,8 +69,9 @@ module anm_parking_dense
 
    !> Move sizes per sieve and the counters of the last sweep.
    type :: move_state_type
-      !> Translation step (mm) and rotation step (rad) of each sieve; the bound of the step.
-      real(wp), allocatable :: d(:), a(:), dmax(:)
+      !> Translation step (mm), rotation step (rad) and relative growth step of each sieve; the
+      !> bound of the translation step.
+      real(wp), allocatable :: d(:), a(:), g(:), dmax(:)
       !> Trials and acceptances of the last sweep per sieve: translations, rotations, growths.
       integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:), ng(:), ag(:)
       !> Sweeps done (keys the streams).
@@ -77,7 +80,8 @@ module anm_parking_dense
 
 contains
 
-   !> Move sizes for sieves of the given largest widths (mm): steps of 5 % of the width, 0.2 rad.
+   !> Move sizes for sieves of the given largest widths (mm): steps of 5 % of the width, 0.2 rad,
+   !> growth steps of 5 % of the scale.
    pure subroutine new_move_state(ms, max_width)
       !> Move state.
       type(move_state_type), intent(out) :: ms
@@ -87,8 +91,9 @@ contains
       n = size(max_width)
       ms%d = 0.05_wp * max_width
       ms%dmax = max_step * max_width
-      allocate (ms%a(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
+      allocate (ms%a(n), ms%g(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
       ms%a = 0.2_wp
+      ms%g = 0.05_wp
       ms%nt = 0
       ms%at = 0
       ms%nr = 0
@@ -339,7 +344,7 @@ contains
    !> their reach, `growth_set`), in id order;
    !> move sizes tuned afterwards; the cell list compacted when a quarter of its records are
    !> retired. With `target` (scale per particle id), a particle below
-   !> its target tries a growth to contact in half of its trials (`evaluate`).
+   !> its target tries a growth step in half of its trials (`propose`).
    !> Length: about 90 lines; the batch's parallel trial and in-order commit belong together.
    subroutine relax_sweep(pk, ms, dp, target, first_sieve, near_short)
       !> Packing.
@@ -397,7 +402,7 @@ contains
             i = act(i0 + b)
             call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b))
             t = omp_get_thread_num()
-            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b), scr(t), sn(b), ok(b))
+            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(t), sn(b), ok(b))
          end do
          !$omp end parallel do
          nc = 0
@@ -408,7 +413,7 @@ contains
             rb = pk%rho(i) * max(1.0_wp, sq(b) / pk%scale(i))
             if (inside(b)) then
                if (conflicts(pk, xn(:, b), rb, cx, cr, nc)) then
-                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b), scr(0), sn(b), ok(b))
+                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(0), sn(b), ok(b))
                end if
             end if
             select case (typ(b))
@@ -461,43 +466,26 @@ contains
       act = pack([(i, i=1, pk%np)], on)
    end function growth_set
 
-   !> Outcome of the trial of particle i (pose x, r; scale sq; type typ; inside): ok when it
-   !> fits. A growth trial (typ 3, sq its target) grows to contact: the target scale when it
-   !> fits, else the largest scale found by bisection between the current scale and the target
-   !> (`growth_bisections` halvings), ok when that is larger than the current scale. The result
-   !> depends only on the particle and the packing within the trial's reach.
-   subroutine evaluate(pk, i, x, r, sq, typ, inside, scr, sc, ok)
+   !> Outcome of the trial of particle i (pose x, r; scale sq; inside): ok when it fits (one
+   !> certified `fits` test; a growth trial's sq is its grown scale). The result depends only on
+   !> the particle and the packing within the trial's reach.
+   subroutine evaluate(pk, i, x, r, sq, inside, scr, sc, ok)
       type(packing_type), intent(in) :: pk
-      integer, intent(in) :: i, typ
+      integer, intent(in) :: i
       real(wp), intent(in) :: x(3), r(3, 3), sq
       logical, intent(in) :: inside
       type(fit_scratch_type), intent(inout) :: scr
       real(wp), intent(out) :: sc
       logical, intent(out) :: ok
-      real(wp) :: lo, hi, mid
-      integer :: j
       sc = sq
       ok = .false.
       if (.not. inside) return
       ok = pk%fits(pk%kind_of(i), x, r, sq, scr, exclude=i)
-      if (ok .or. typ /= 3) return
-      lo = pk%scale(i)
-      hi = sq
-      do j = 1, growth_bisections
-         mid = 0.5_wp * (lo + hi)
-         if (pk%fits(pk%kind_of(i), x, r, mid, scr, exclude=i)) then
-            lo = mid
-         else
-            hi = mid
-         end if
-      end do
-      sc = lo
-      ok = lo > pk%scale(i)
    end subroutine evaluate
 
    !> The trial of particle i in sweep k: new centre x, rotation r and scale sc; typ 1
    !> translation, 2 rotation, 3 growth (a particle below its target scale `tgt`, half of its
-   !> trials: sc is the target, `evaluate` finds how far it grows); inside false when a walled
+   !> trials: sc = min(tgt, scale (1 + g)), g the sieve's growth step); inside false when a walled
    !> box's centre would leave the box.
    subroutine propose(pk, ms, seed, k, i, tgt, x, r, sc, typ, inside)
       type(packing_type), intent(in) :: pk
@@ -520,7 +508,7 @@ contains
       if (sc < tgt) then
          if (rng%uniform() < 0.5_wp) then
             typ = 3
-            sc = tgt
+            sc = min(tgt, sc * (1.0_wp + ms%g(s)))
             return
          end if
       end if
@@ -570,7 +558,8 @@ contains
       hit = .false.
    end function conflicts
 
-   !> Tune the move sizes of every sieve moved in the last sweep towards the target acceptance.
+   !> Tune the move sizes (translation, rotation, growth) of every sieve moved in the last sweep
+   !> towards the target acceptance.
    pure subroutine tune(ms, target)
       type(move_state_type), intent(inout) :: ms
       real(wp), intent(in) :: target
@@ -580,6 +569,11 @@ contains
          if (ms%nt(s) > 0) then
             acc = real(ms%at(s), wp) / real(ms%nt(s), wp)
             ms%d(s) = min(ms%dmax(s), max(0.5_wp * ms%d(s), min(2.0_wp * ms%d(s), ms%d(s) * (acc + 1.0_wp) &
+                                                                 / (target + 1.0_wp))))
+         end if
+         if (ms%ng(s) > 0) then
+            acc = real(ms%ag(s), wp) / real(ms%ng(s), wp)
+            ms%g(s) = min(max_growth, max(0.5_wp * ms%g(s), min(2.0_wp * ms%g(s), ms%g(s) * (acc + 1.0_wp) &
                                                                  / (target + 1.0_wp))))
          end if
          if (ms%nr(s) > 0) then
