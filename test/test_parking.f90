@@ -27,6 +27,7 @@ contains
               new_unittest("cell list equals brute force, periodic, sizes 1000:1", test_cells_periodic), &
               new_unittest("cell list equals brute force, walls", test_cells_walls), &
               new_unittest("cell list finds all images in a small periodic box", test_cells_images), &
+              new_unittest("cell list: reorder keeps the candidates and their order", test_cells_reorder), &
               new_unittest("neighbours: candidates, certain overlaps, id range = brute force, periodic", &
                            test_neighbours_periodic), &
               new_unittest("neighbours: candidates, certain overlaps, id range = brute force, walls", test_neighbours_walls), &
@@ -67,6 +68,8 @@ contains
          ! log-uniform radii between rmin and rmax
          rho(i) = rmin * (rmax / rmin)**rng%uniform()
          call cl%insert(i, c(:, i), rho(i))
+         ! blocks laid out in cell order half way: later insertions go on from there
+         if (i == n / 2) call cl%reorder()
       end do
       do k = 1, nq
          q = [rng%uniform(), rng%uniform(), rng%uniform()] * box
@@ -97,6 +100,60 @@ contains
       end do
    end subroutine run_case
 
+   !> `reorder` (blocks in cell order) changes neither the candidates of `query` and `neighbours`
+   !> nor their order: 3000 particles of radii 1:20 in a periodic box, 200 queries before and after.
+   subroutine test_cells_reorder(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: n = 3000, nq = 200
+      type(cell_list_type) :: cl
+      type(rng_type) :: rng
+      real(wp) :: c(3, n), rho(n), q(3, nq), rq(nq), box(3)
+      real(wp), allocatable :: shift(:, :)
+      integer, allocatable :: cand(:), before(:, :), after(:, :)
+      integer :: i, k, ncand, pass
+      logical :: hit
+      box = [10.0_wp, 12.0_wp, 9.0_wp]
+      call new_rng(rng, 17_i8, 0_i8)
+      call new_cell_list(cl, box, .true., 0.05_wp)
+      do i = 1, n
+         c(:, i) = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rho(i) = 0.05_wp * 20.0_wp**rng%uniform()
+         call cl%insert(i, c(:, i), rho(i), rin=0.5_wp * rho(i))
+      end do
+      do k = 1, nq
+         q(:, k) = [rng%uniform(), rng%uniform(), rng%uniform()] * box
+         rq(k) = 0.05_wp * 20.0_wp**rng%uniform()
+      end do
+      allocate (before(0:2 * n, 2 * nq), after(0:2 * n, 2 * nq))
+      do pass = 1, 2
+         do k = 1, nq
+            call cl%query(q(:, k), rq(k), c, rho, cand, shift, ncand)
+            if (pass == 1) then
+               before(0, k) = ncand
+               before(1:ncand, k) = cand(:ncand)
+            else
+               after(0, k) = ncand
+               after(1:ncand, k) = cand(:ncand)
+            end if
+            call cl%neighbours(q(:, k), rq(k), cand, shift, ncand, hit)
+            if (pass == 1) then
+               before(0, nq + k) = ncand
+               before(1:ncand, nq + k) = cand(:ncand)
+            else
+               after(0, nq + k) = ncand
+               after(1:ncand, nq + k) = cand(:ncand)
+            end if
+         end do
+         if (pass == 1) call cl%reorder()
+      end do
+      do k = 1, 2 * nq
+         call check(error, all(before(0:before(0, k), k) == after(0:before(0, k), k)), &
+                    "candidates or their order changed by reorder")
+         if (allocated(error)) return
+      end do
+      call check(error, sum(before(0, :)) > nq, "too few candidates to compare")
+   end subroutine test_cells_reorder
+
    !> `neighbours` against brute force: with rin absent, the candidates (jmin < id <= jmax) are the
    !> particles (and images) whose bounding spheres meet the query's; with rin, `hit` is true
    !> exactly when one of them lies closer than rin + rin_j, and otherwise the candidates are
@@ -121,6 +178,7 @@ contains
          rho(i) = rmin * (rmax / rmin)**rng%uniform()
          rin(i) = rho(i) * (0.3_wp + 0.7_wp * rng%uniform())
          call cl%insert(i, c(:, i), rho(i), rin=rin(i))
+         if (i == n / 2) call cl%reorder()
       end do
       do k = 1, nq
          q = [rng%uniform(), rng%uniform(), rng%uniform()] * box

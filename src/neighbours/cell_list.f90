@@ -26,9 +26,17 @@
 !> Periodic boxes: displacements use the nearest image; when rho_q + rho_j exceeds half an edge,
 !> every image within reach is returned.
 !>
+!> Blocks are appended to the pool as cells fill, so after many insertions a cell's blocks lie
+!> anywhere in the pool and a query's cells cost a cache miss each (the head, then the block): at
+!> 10^6 sand grains the query was a third of the run, mostly these misses. `reorder` lays the
+!> blocks out again in cell order (level by level, cells in index order, each chain in its order):
+!> a query's cells along x then lie side by side in memory. It changes no answer, nor the order of
+!> the candidates.
+!>
 !> Usage:
 !>     call new_cell_list(cl, box, periodic, rho_min)
 !>     call cl%insert(i, center, rho, rin)
+!>     call cl%reorder()                   ! now and then, after many insertions
 !>     call cl%neighbours(center, rho, cand, shift, ncand, hit, rin=rin_q, jmin=j0)
 !>     call cl%query(center, rho, centers, radii, cand, shift, ncand)
 module anm_neighbours_cell_list
@@ -88,6 +96,8 @@ module anm_neighbours_cell_list
       procedure :: insert
       !> Room for a number of blocks without growing.
       procedure :: reserve
+      !> Lay the blocks out again in cell order (memory locality of the queries).
+      procedure :: reorder
       !> Particles whose bounding spheres (caller's arrays) intersect a query sphere.
       procedure :: query
       !> Candidates from the stored records, or the first certain overlap.
@@ -219,6 +229,36 @@ contains
       integer, intent(in) :: n
       if (n > size(self%blocks)) call resize_pool(self, n)
    end subroutine reserve
+
+   !> Lay the blocks out again in cell order: level by level, cells in index order, the blocks of
+   !> a cell's chain one after the other in chain order. Queries give the same candidates in the
+   !> same order afterwards; the pool keeps its capacity (the old and the new pool exist at once
+   !> during the copy).
+   pure subroutine reorder(self)
+      !> Cell list.
+      class(cell_list_type), intent(inout) :: self
+      type(cell_block_type), allocatable :: nb(:)
+      integer :: k, cell, b, n
+      allocate (nb(size(self%blocks)))
+      n = 0
+      do k = 1, size(self%levels)
+         if (.not. allocated(self%levels(k)%head)) cycle
+         do cell = 1, size(self%levels(k)%head)
+            b = self%levels(k)%head(cell)
+            if (b == 0) cycle
+            self%levels(k)%head(cell) = n + 1
+            do while (b > 0)
+               n = n + 1
+               nb(n) = self%blocks(b)
+               b = self%blocks(b)%next
+               nb(n)%next = 0
+               if (b > 0) nb(n)%next = n + 1
+            end do
+         end do
+      end do
+      call move_alloc(nb, self%blocks)
+      self%nblock = n
+   end subroutine reorder
 
    !> A block pool of n (>= nblock) blocks.
    pure subroutine resize_pool(self, n)

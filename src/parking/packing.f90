@@ -49,6 +49,9 @@ module anm_parking_packing
    end type fit_scratch_type
 
    !> The parked particles.
+   !> Records at the first reordering of the cell list's blocks (below, the pool fits in cache).
+   integer, parameter :: first_reorder = 2**16
+
    type :: packing_type
       !> Parameters.
       type(packing_params_type) :: p
@@ -64,6 +67,9 @@ module anm_parking_packing
       !> record (0: retired).
       integer :: nrecord = 0, ndead = 0
       integer, allocatable :: record(:), owner(:)
+      !> Record count at which the cell list's blocks are next laid out in cell order
+      !> (`cell_list_type%reorder`; doubled each time).
+      integer :: next_reorder = first_reorder
       type(cell_list_type) :: cl
    contains
       !> Add a particle.
@@ -151,6 +157,11 @@ contains
       self%record(i) = self%nrecord
       call self%cl%insert(self%nrecord, self%center(:, i), self%rho(i), &
                           rin=self%scale(i) * self%kinds(self%kind_of(i))%r_in_parked)
+      ! blocks in cell order now and then (amortised: at doublings of the record count)
+      if (self%nrecord >= self%next_reorder) then
+         call self%cl%reorder()
+         self%next_reorder = merge(2 * self%next_reorder, huge(1), self%next_reorder < huge(1) / 2)
+      end if
    end subroutine insert_record
 
    !> Remove particle i; the last particle takes id i.
@@ -205,9 +216,12 @@ contains
       call new_cell_list(self%cl, self%p%box, self%p%periodic, self%p%rho_min, capacity=max(initial_capacity, self%np))
       self%nrecord = 0
       self%ndead = 0
+      self%next_reorder = huge(1)
       do i = 1, self%np
          call insert_record(self, i)
       end do
+      if (self%np >= first_reorder) call self%cl%reorder()
+      self%next_reorder = max(first_reorder, merge(2 * self%nrecord, huge(1), self%nrecord < huge(1) / 2))
    end subroutine compact
 
    !> Make room for n particles and as many cell-list records and blocks (nothing changes when
