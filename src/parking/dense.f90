@@ -360,7 +360,7 @@ contains
       !> Only particles below their target scale and their neighbours move (default false).
       logical, intent(in), optional :: near_short
       type(fit_scratch_type), allocatable :: scr(:)
-      real(wp), allocatable :: xn(:, :), rn(:, :, :), sn(:), sq(:), cx(:, :), cr(:), tg(:)
+      real(wp), allocatable :: xn(:, :), rn(:, :, :), sq(:), cx(:, :), cr(:), tg(:)
       logical, allocatable :: ok(:), inside(:)
       integer, allocatable :: typ(:), act(:)
       integer :: nb, i0, n, b, i, t, nc, s, np, s0, na
@@ -389,20 +389,20 @@ contains
       na = size(act)
       nb = dp%batch
       if (nb <= 0) nb = 32 * max(1, dp%nthreads)
-      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sn(nb), sq(nb), ok(nb), inside(nb), &
+      allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sq(nb), ok(nb), inside(nb), &
                 typ(nb))
       ! committed moves of the batch: old and new centres, bounding radius
       allocate (cx(3, 2 * nb), cr(2 * nb))
       i0 = 0
       do while (i0 < na)
          n = min(nb, na - i0)
-         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sn, sq, ok, inside, typ, n, i0, k, scr, tg, act) &
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, n, i0, k, scr, tg, act) &
          !$omp private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
             i = act(i0 + b)
             call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b))
             t = omp_get_thread_num()
-            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(t), sn(b), ok(b))
+            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(t), ok(b))
          end do
          !$omp end parallel do
          nc = 0
@@ -413,7 +413,7 @@ contains
             rb = pk%rho(i) * max(1.0_wp, sq(b) / pk%scale(i))
             if (inside(b)) then
                if (conflicts(pk, xn(:, b), rb, cx, cr, nc)) then
-                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(0), sn(b), ok(b))
+                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(0), ok(b))
                end if
             end if
             select case (typ(b))
@@ -432,7 +432,7 @@ contains
                cx(:, nc + 2) = xn(:, b)
                cr(nc + 1:nc + 2) = rb
                nc = nc + 2
-               call pk%move(i, xn(:, b), rn(:, :, b), sn(b))
+               call pk%move(i, xn(:, b), rn(:, :, b), sq(b))
             end if
          end do
          i0 = i0 + n
@@ -469,15 +469,13 @@ contains
    !> Outcome of the trial of particle i (pose x, r; scale sq; inside): ok when it fits (one
    !> certified `fits` test; a growth trial's sq is its grown scale). The result depends only on
    !> the particle and the packing within the trial's reach.
-   subroutine evaluate(pk, i, x, r, sq, inside, scr, sc, ok)
+   subroutine evaluate(pk, i, x, r, sq, inside, scr, ok)
       type(packing_type), intent(in) :: pk
       integer, intent(in) :: i
       real(wp), intent(in) :: x(3), r(3, 3), sq
       logical, intent(in) :: inside
       type(fit_scratch_type), intent(inout) :: scr
-      real(wp), intent(out) :: sc
       logical, intent(out) :: ok
-      sc = sq
       ok = .false.
       if (.not. inside) return
       ok = pk%fits(pk%kind_of(i), x, r, sq, scr, exclude=i)
