@@ -34,15 +34,18 @@ contains
               new_unittest("compact keeps the particles and the answers", test_compact), &
               new_unittest("fits since a mark tests only later particles", test_since), &
               new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds), &
-              new_unittest("reserve and growth keep the particles and the answers", test_reserve)]
+              new_unittest("reserve and growth keep the particles and the answers", test_reserve), &
+              new_unittest("slabs: a slab's local packing answers as the whole one, periodic", test_slabs_periodic), &
+              new_unittest("slabs: a slab's local packing answers as the whole one, walls", test_slabs_walls)]
    end subroutine collect_packing
 
-   !> A packing of unit-sphere kinds (kind 1) with periodic or walled box.
-   subroutine sphere_packing(pk, periodic, box, error)
+   !> A packing of unit-sphere kinds (kind 1) with periodic or walled box (slab `slab` of `nslab`).
+   subroutine sphere_packing(pk, periodic, box, error, nslab, slab)
       type(packing_type), intent(out) :: pk
       logical, intent(in) :: periodic
       real(wp), intent(in) :: box(3)
       type(error_type), allocatable, intent(out) :: error
+      integer, intent(in), optional :: nslab, slab
       type(particle_kind_type), allocatable :: kinds(:)
       type(packing_params_type) :: p
       allocate (kinds(1))
@@ -56,6 +59,8 @@ contains
       p%box = box
       p%periodic = periodic
       p%rho_min = 0.1_wp
+      if (present(nslab)) p%nslab = nslab
+      if (present(slab)) p%slab = slab
       call new_packing(pk, p, kinds)
    end subroutine sphere_packing
 
@@ -194,6 +199,88 @@ contains
       end do
       call check(error, nfit > 20 .and. nover > 20, "both answers were tested")
    end subroutine fits_case
+
+   !> Slabs (the MPI build's spatial decomposition): for each slab of 3 along x, particles are added
+   !> in batches with `localize` after each (and the reach grown once, which rebuilds the cell
+   !> list); then every candidate centred in the slab with a bounding radius within the reach fits
+   !> exactly when it overlaps none of all the particles (brute force over the whole packing),
+   !> while the slab's cell list holds fewer particles than the packing.
+   subroutine slabs_case(error, periodic)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      type(packing_type) :: pk
+      type(rng_type) :: rng
+      type(fit_scratch_type) :: scratch
+      real(wp) :: x(3), r, lx
+      integer :: slab, batch, i, k, ans, nfit, nover, first, nlocal, noutside
+      lx = 12.0_wp
+      do slab = 0, 2
+         call sphere_packing(pk, periodic, [lx, 6.0_wp, 6.0_wp], error, nslab=3, slab=slab)
+         if (allocated(error)) return
+         call new_rng(rng, 31_i8, int(slab, i8))
+         call pk%set_reach(0.3_wp)
+         do batch = 1, 8
+            ! the reach grows once: the cell list is rebuilt with the wider halo
+            if (batch == 5) call pk%set_reach(0.6_wp)
+            first = pk%np + 1
+            do i = 1, 25
+               call pk%add(1, [rng%uniform() * lx, rng%uniform() * 6.0_wp, rng%uniform() * 6.0_wp], &
+                           random_rotation(rng), 0.05_wp + 0.25_wp * rng%uniform(), 1)
+            end do
+            call pk%localize(first)
+         end do
+         nlocal = count(pk%record(:pk%np) > 0)
+         call check(error, nlocal > 0 .and. nlocal < pk%np, "the slab holds part of the particles")
+         if (allocated(error)) return
+         nfit = 0
+         nover = 0
+         noutside = 0
+         do k = 1, 2000
+            ! centres near the slab's faces, where the halo matters
+            x = [(slab + merge(0.0_wp, 1.0_wp, k <= 1000)) * lx / 3 + merge(1.0_wp, -1.0_wp, k <= 1000) * 0.7_wp &
+                 * rng%uniform(), rng%uniform() * 6.0_wp, rng%uniform() * 6.0_wp]
+            if (.not. pk%owns(x)) cycle
+            r = 0.6_wp * rng%uniform()
+            ans = brute_fit(pk, x, r, .not. periodic)
+            if (ans < 0) cycle
+            if (ans == 1) nfit = nfit + 1
+            if (ans == 0) nover = nover + 1
+            if (ans == 0 .and. only_outside(pk, x, r, slab * lx / 3, (slab + 1) * lx / 3)) noutside = noutside + 1
+            call check(error, pk%fits(1, x, random_rotation(rng), r, scratch) .eqv. (ans == 1), &
+                       "a slab's fits disagrees with the whole packing")
+            if (allocated(error)) return
+         end do
+         call check(error, nfit > 20 .and. nover > 20, "both answers were tested")
+         if (allocated(error)) return
+         call check(error, noutside > 20, "candidates overlapping only particles centred outside the slab were tested")
+         if (allocated(error)) return
+      end do
+   end subroutine slabs_case
+
+   !> Whether every particle that the sphere (x, r) overlaps has its centre outside [lo, hi) along x.
+   logical function only_outside(pk, x, r, lo, hi) result(yes)
+      type(packing_type), intent(in) :: pk
+      real(wp), intent(in) :: x(3), r, lo, hi
+      integer :: j
+      yes = .true.
+      do j = 1, pk%np
+         if (distance(pk, pk%center(:, j), x) >= r + pk%scale(j)) cycle
+         if (pk%center(1, j) >= lo .and. pk%center(1, j) < hi) then
+            yes = .false.
+            return
+         end if
+      end do
+   end function only_outside
+
+   subroutine test_slabs_periodic(error)
+      type(error_type), allocatable, intent(out) :: error
+      call slabs_case(error, .true.)
+   end subroutine test_slabs_periodic
+
+   subroutine test_slabs_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      call slabs_case(error, .false.)
+   end subroutine test_slabs_walls
 
    subroutine test_fits_periodic(error)
       type(error_type), allocatable, intent(out) :: error

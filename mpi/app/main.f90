@@ -27,18 +27,21 @@ program anm_mpi
    type(mpi_verify_type) :: split
    integer :: status, provided, k
    character(len=:), allocatable :: nml
-   logical :: force, stats
+   logical :: force, stats, replicated
 
    ! MPI is called outside the OpenMP regions only
    call MPI_Init_thread(MPI_THREAD_FUNNELED, provided)
    call ignore_file_size_signal()
    args = command_arguments()
-   ! `anm run FILE.nml [--force] [--comm-stats]`: --comm-stats prints what was communicated
+   ! `anm run FILE.nml [--force] [--comm-stats] [--replicated]`: --comm-stats prints what was
+   ! communicated; --replicated parks with the whole packing on every process instead of slabs
    stats = .false.
+   replicated = .false.
    do k = 2, size(args)
       if (args(1)%s == "run" .and. args(k)%s == "--comm-stats") stats = .true.
+      if (args(1)%s == "run" .and. args(k)%s == "--replicated") replicated = .true.
    end do
-   call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads(), count=stats)
+   call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads(), count=stats, replicated=replicated)
    call new_mpi_output(io, MPI_COMM_WORLD)
    call new_mpi_verify(split, MPI_COMM_WORLD)
    if (size(args) < 1) then
@@ -52,17 +55,17 @@ program anm_mpi
          select case (args(k)%s)
          case ("--force")
             force = .true.
-         case ("--comm-stats")
+         case ("--comm-stats", "--replicated")
          case default
             if (allocated(nml) .or. args(k)%s(1:min(1, len(args(k)%s))) == "-") then
-               call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats]", error_code%usage)
+               call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats] [--replicated]", error_code%usage)
                exit
             end if
             nml = args(k)%s
          end select
       end do
       if (.not. allocated(nml) .and. .not. allocated(error)) &
-         call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats]", error_code%usage)
+         call fatal_error(error, "usage: anm run FILE.nml [--force] [--comm-stats] [--replicated]", error_code%usage)
       if (.not. allocated(error)) then
          call run_job(nml, output_unit, error_unit, error, omp_get_max_threads(), force=force, dist=dist, par=io)
          if (stats .and. .not. allocated(error)) call write_comm_stats(dist, error_unit)

@@ -1,9 +1,19 @@
-!> Phase 1 of the parking's batches over MPI processes (replicated data, distributed speculation):
-!> every process holds the whole packing; member b of a batch runs phase 1 on process
-!> mod(b - 1, nranks) (with its threads), and the attempts (random stream state, counters, pose,
-!> count) are gathered to every process with one MPI_Allgatherv. Phase 2 (in-order re-check and
-!> accept) then runs identically on every process, so every process parks the serial model
-!> (anm_parking_scheduler: any batch composition gives the serial result).
+!> Phase 1 of the parking's batches over MPI processes, in one of two modes:
+!>
+!> - spatial (the default for RSA): process r owns slab r of nranks equal slabs along x and its
+!>   cell list holds only the particles in reach of the slab (anm_parking_packing's slabs). Every
+!>   process draws every member's attempts in windows and tests those centred in its slab; one
+!>   MPI_Allreduce(MIN) of 8 bytes per member and window gives each member's first fitting
+!>   attempt (anm_parking_scheduler's `spatial_search`). Hit members of phase 2 continue the same
+!>   way, one member per search.
+!> - replicated (`spatial = .false.`; the dense strategy, or `anm run --replicated`): every process
+!>   holds the whole packing; member b of a batch runs phase 1 on process mod(b - 1, nranks) (with
+!>   its threads), and the attempts (random stream state, counters, pose, count) are gathered to
+!>   every process with one MPI_Allgatherv.
+!>
+!> Phase 2 (in-order re-check and accept) then runs identically on every process, so every
+!> process parks the serial model (anm_parking_scheduler: any batch composition gives the serial
+!> result).
 !>
 !> With `count = .true.` it counts what it communicates (`comm_stats_type`: per batch its sieve
 !> and the bytes gathered to every process, the batch-clock reductions) and `write_comm_stats`
@@ -18,9 +28,10 @@ module anm_mpi_distributor
    use anm_parking_attempts, only: attempt_type, attempt_params_type
    use anm_parking_packing, only: packing_type
    use anm_parking_void_grid, only: void_grid_type
-   use anm_parking_scheduler, only: phase1_distributor_type, run_phase1
+   use anm_parking_scheduler, only: phase1_distributor_type, run_phase1, spatial_search
    use mpi_f08, only: MPI_Comm, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
-                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime
+                      MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
+                      MPI_IN_PLACE
    implicit none
    private
 
@@ -38,6 +49,8 @@ module anm_mpi_distributor
       integer(int64) :: reductions = 0
       !> Bytes of one attempt.
       integer :: attempt_bytes = 0
+      !> Spatial mode: the first-fit reductions (windows) and their bytes, per run.
+      integer(int64) :: windows = 0, window_bytes = 0
       !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
       !> the gathers (s).
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
@@ -54,13 +67,14 @@ module anm_mpi_distributor
    contains
       procedure :: phase1
       procedure :: agree
+      procedure :: agree_first
    end type mpi_distributor_type
 
 contains
 
    !> A distributor over `comm` (collective): `threads` are this process' threads; the batches are
    !> sized for the threads of all processes; rank 0 writes.
-   subroutine new_mpi_distributor(dist, comm, threads, count)
+   subroutine new_mpi_distributor(dist, comm, threads, count, replicated)
       !> Distributor.
       type(mpi_distributor_type), intent(out) :: dist
       !> Communicator.
@@ -69,6 +83,8 @@ contains
       integer, intent(in) :: threads
       !> Count what is communicated (comm_stats_type).
       logical, intent(in), optional :: count
+      !> Replicated data instead of slabs (default: slabs, the spatial decomposition).
+      logical, intent(in), optional :: replicated
       dist%comm = comm
       if (present(count)) then
          if (count) then
@@ -80,11 +96,15 @@ contains
       call MPI_Comm_size(comm, dist%nranks)
       call MPI_Allreduce(max(1, threads), dist%workers, 1, MPI_INTEGER, MPI_SUM, comm)
       dist%writer = dist%rank == 0
+      dist%spatial = dist%nranks > 1
+      if (present(replicated)) dist%spatial = dist%spatial .and. .not. replicated
+      dist%nslab = dist%nranks
+      dist%slab = dist%rank
    end subroutine new_mpi_distributor
 
    !> Phase 1 of a batch: this process' members (rank + 1, rank + 1 + nranks, ...), then every
    !> member's attempt gathered to every process (collective).
-   subroutine phase1(self, at, ap, pk, vg, nstream)
+   subroutine phase1(self, at, ap, pk, vg, nstream, window)
       !> Distributor.
       class(mpi_distributor_type), intent(in) :: self
       !> Attempts of the batch.
@@ -97,6 +117,8 @@ contains
       type(void_grid_type), intent(in) :: vg
       !> Particles of the sieve before this batch.
       integer, intent(in) :: nstream
+      !> Attempts of the first window (spatial mode).
+      integer, intent(in) :: window
       integer(int8), allocatable :: mine(:), all(:)
       integer, allocatable :: counts(:), displs(:)
       integer :: n, r, bytes, i, b
@@ -106,9 +128,21 @@ contains
       ! every process holds the same binary: an attempt travels as its bytes
       bytes = storage_size(at(1)) / 8
       if (associated(self%stats)) then
-         call record_batch(self%stats, ap%sieve, n, bytes, self%nranks)
+         call record_batch(self%stats, ap%sieve, n, merge(0, bytes, self%spatial), self%nranks)
          call cpu_time(c0)
          w0 = MPI_Wtime()
+      end if
+      if (self%spatial) then
+         do b = 1, n
+            call at(b)%start(ap, nstream + b)
+         end do
+         call spatial_search(at, [(b, b=1, n)], ap, pk, vg, window, self)
+         if (associated(self%stats)) then
+            call cpu_time(c1)
+            self%stats%phase1_cpu = self%stats%phase1_cpu + (c1 - c0)
+            self%stats%phase1_wall = self%stats%phase1_wall + (MPI_Wtime() - w0)
+         end if
+         return
       end if
       call run_phase1(at, ap, pk, vg, nstream, self%rank + 1, self%nranks)
       if (associated(self%stats)) then
@@ -155,6 +189,26 @@ contains
       if (associated(self%stats)) self%stats%reductions = self%stats%reductions + 1
    end function agree
 
+   !> The smallest of each value over the processes, in place (collective): the first fitting
+   !> attempt of each member of a spatial search's window.
+   subroutine agree_first(self, k)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' values; on return the smallest over the processes.
+      integer(int64), intent(inout) :: k(:)
+      real(wp) :: w0
+      if (self%nranks == 1) return
+      if (associated(self%stats)) w0 = MPI_Wtime()
+      call MPI_Allreduce(MPI_IN_PLACE, k, size(k), MPI_INTEGER8, MPI_MIN, self%comm)
+      if (associated(self%stats)) then
+         self%stats%gather_wall = self%stats%gather_wall + (MPI_Wtime() - w0)
+         self%stats%windows = self%stats%windows + 1
+         self%stats%window_bytes = self%stats%window_bytes + 8_int64 * size(k)
+         if (self%stats%nbatch > 0) self%stats%bytes(self%stats%nbatch) = self%stats%bytes(self%stats%nbatch) &
+                                                                           + 8_int64 * size(k)
+      end if
+   end subroutine agree_first
+
    !> Count one batch of n members of `bytes` each (nothing is communicated on one process).
    subroutine record_batch(st, sieve, n, bytes, nranks)
       type(comm_stats_type), intent(inout) :: st
@@ -193,6 +247,9 @@ contains
       character(len=*), parameter :: fmt_sieve = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
                                      '" members, ",i0," bytes gathered to each rank (per batch min/median/max ",' // &
                                      'i0,"/",i0,"/",i0,")")'
+      character(len=*), parameter :: fmt_window = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
+                                      '" members, ",i0," bytes reduced by each rank (per batch min/median/max ",' // &
+                                      'i0,"/",i0,"/",i0,")")'
       mem = peak_memory_kb()
       call MPI_Allreduce(mem, lo, 1, MPI_INTEGER8, MPI_MIN, dist%comm)
       call MPI_Allreduce(mem, hi, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
@@ -209,14 +266,25 @@ contains
             nm = pack(st%members(:st%nbatch), st%sieve(:st%nbatch) == s)
             per = 0
             if (dist%nranks > 1) per = st%attempt_bytes
-            write (unit, fmt_sieve) s, nb, sum(int(nm, int64)), sum(b), minval(nm) * per, median(nm) * per, &
-               maxval(nm) * per
+            if (dist%spatial) then
+               write (unit, fmt_window) s, nb, sum(int(nm, int64)), sum(b), minval(b), median_i8(b), maxval(b)
+            else
+               write (unit, fmt_sieve) s, nb, sum(int(nm, int64)), sum(b), minval(nm) * per, median(nm) * per, &
+                  maxval(nm) * per
+            end if
             total = total + sum(b)
          end do
-         write (unit, '("mpi: in all ",i0," batches, ",i0," bytes gathered to each rank (",i0," bytes per ",' // &
-                '"attempt, one MPI_Allgatherv per batch), ",i0," MPI_Allreduce of 8 bytes (the batch clock, ",' // &
-                '"the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, total, st%attempt_bytes, &
-            st%reductions, dist%nranks, dist%workers / dist%nranks
+         if (dist%spatial) then
+            write (unit, '("mpi: in all ",i0," batches (slabs), ",i0," first-fit reductions (MPI_Allreduce MIN, ",' // &
+                   '"8 bytes per member searched), ",i0," bytes reduced by each rank; ",i0," MPI_Allreduce of 8 ",' // &
+                   '"bytes (the batch clock, the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, &
+               st%windows, st%window_bytes, st%reductions, dist%nranks, dist%workers / dist%nranks
+         else
+            write (unit, '("mpi: in all ",i0," batches, ",i0," bytes gathered to each rank (",i0," bytes per ",' // &
+                   '"attempt, one MPI_Allgatherv per batch), ",i0," MPI_Allreduce of 8 bytes (the batch clock, ",' // &
+                   '"the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, total, st%attempt_bytes, &
+               st%reductions, dist%nranks, dist%workers / dist%nranks
+         end if
          call cpu_time(cpu)
          write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
                 '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu
@@ -261,6 +329,26 @@ contains
          if (2 * seen >= size(v)) return
       end do
    end function median
+
+   !> The median of non-negative 8-byte values (sorting a copy; one value per batch).
+   pure integer(int64) function median_i8(v) result(m)
+      integer(int64), intent(in) :: v(:)
+      integer(int64), allocatable :: c(:)
+      integer(int64) :: t
+      integer :: i, j
+      c = v
+      do i = 2, size(c)
+         t = c(i)
+         j = i - 1
+         do while (j >= 1)
+            if (c(j) <= t) exit
+            c(j + 1) = c(j)
+            j = j - 1
+         end do
+         c(j + 1) = t
+      end do
+      m = c((size(c) + 1) / 2)
+   end function median_i8
 
    !> Members of a batch of n on rank r of nranks (round robin).
    pure integer function members(n, r, nranks) result(m)

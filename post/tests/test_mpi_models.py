@@ -195,3 +195,59 @@ def test_mpi_verify_reports_the_serial_audit(periodic, mpi_bin, anm_bin, tmp_pat
         res = run_mpi(mpi_bin, ranks, 1, args)
         assert res.returncode == 3, res.stdout + res.stderr
         assert res.stdout == serial.stdout, f"{ranks} ranks"
+
+
+# Slabs (the spatial decomposition) on the edges of the attempt sequences: a walled box with void
+# placement, exclusion shells in mm (lazy kinds in width levels, so the reach grows as kinds are
+# built) and particles that exhaust their attempts; a periodic box with two shapes and two
+# orientations per particle (kinds built per sieve). Synthetic shapes: no shapes folder needed.
+SLAB_NML = """&box length = 8.0, 8.0, 8.0, periodic = {periodic} /
+&sieves
+   nsieve = 3
+   min_width = 2.0, 1.0, 0.5
+   max_width = 2.4, 1.2, 0.6
+   fraction = 0.12, 0.08, 0.06
+   source = 'synthetic', 'synthetic', 'synthetic'
+   order = 8, 6, 5
+/
+&synthetic count = 6 /
+&parking {parking} /
+&shells {shells} /
+&output directory = '{out}', name = 'model', vrml = .false. /
+&run seed = 7 /
+"""
+SLAB_JOBS = {
+    "walls-void-exclusion-mm": dict(periodic=".false.", parking="max_locations = 300, placement = 'void', max_failures = 5",
+                                    shells="nlayer = 1, thickness = 0.05, thickness_unit = 'mm', mode = 'exclude'"),
+    "periodic-shapes-orientations": dict(periodic=".true.",
+                                         parking="max_shapes = 2, max_orientations = 2, max_locations = 100",
+                                         shells="nlayer = 1, thickness = 0.03, thickness_unit = 'fraction', "
+                                                "mode = 'exclude'"),
+}
+
+
+@pytest.mark.parametrize("job", sorted(SLAB_JOBS))
+def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp_path):
+    """The serial model for 2 and 3 ranks in slabs and for 2 ranks with replicated data
+    (`--replicated`), dataset by dataset (scripts/compare_models.py). The first job's last sieve
+    exhausts attempts (particles not parked), which ends a spatial search with no fit anywhere."""
+    def write(out):
+        out.mkdir()
+        nml = out / "job.nml"
+        nml.write_text(SLAB_NML.format(out=out, **SLAB_JOBS[job]))
+        return nml
+    ser = write(tmp_path / "serial")
+    res = subprocess.run([anm_bin, "run", str(ser)], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, OMP_NUM_THREADS="2"))
+    assert res.returncode == 0, res.stdout + res.stderr
+    if job.startswith("walls"):
+        assert "particles not parked" in res.stderr and not re.search(r"sieve 3 done: .* 0 particles not parked",
+                                                                          res.stderr), res.stderr
+    for ranks, extra in ((2, []), (3, []), (2, ["--replicated"])):
+        out = tmp_path / f"np{ranks}{''.join(extra)}"
+        nml = write(out)
+        res = run_mpi(mpi_bin, ranks, 1, ["run", str(nml), "--comm-stats"] + extra)
+        assert res.returncode == 0, res.stdout + res.stderr
+        assert ("first-fit reductions" in res.stderr) == (not extra), res.stderr
+        cmp = compare(tmp_path / "serial" / "model.h5", out / "model.h5")
+        assert cmp.returncode == 0, f"{ranks} ranks {extra}:\n" + cmp.stdout + cmp.stderr

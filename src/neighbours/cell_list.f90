@@ -94,6 +94,8 @@ module anm_neighbours_cell_list
    contains
       !> Insert particle i.
       procedure :: insert
+      !> Remove particle i.
+      procedure :: remove
       !> Room for a number of blocks without growing.
       procedure :: reserve
       !> Lay the blocks out again in cell order (memory locality of the queries).
@@ -217,6 +219,46 @@ contains
          lv%count = lv%count + 1
       end associate
    end subroutine insert
+
+   !> Remove the record of particle i, inserted with this centre and bounding radius (nothing
+   !> happens when the cell holds no record of i). The last record of the cell's head block takes
+   !> its place, so every block of a chain but the head stays full; a head block left empty leaves
+   !> the chain (its room is reused after `reorder`). The order of the cell's records changes, the
+   !> candidates of a query do not (the parking's tests depend on the candidates, not their
+   !> order). The level's largest radius is not lowered: queries stay correct, a little wider.
+   pure subroutine remove(self, i, center, rho)
+      !> Cell list.
+      class(cell_list_type), intent(inout) :: self
+      !> Particle id.
+      integer, intent(in) :: i
+      !> Centre and bounding radius given at insertion.
+      real(wp), intent(in) :: center(3), rho
+      integer :: k, c(3), cell, b, m, first
+      k = level_for(self, rho)
+      if (.not. allocated(self%levels(k)%head)) return
+      associate (lv => self%levels(k))
+         c(1) = cell_coord(center(1), lv%h(1), lv%n(1), self%periodic)
+         c(2) = cell_coord(center(2), lv%h(2), lv%n(2), self%periodic)
+         c(3) = cell_coord(center(3), lv%h(3), lv%n(3), self%periodic)
+         cell = 1 + c(1) + lv%n(1) * (c(2) + lv%n(2) * c(3))
+         first = lv%head(cell)
+         b = first
+         do while (b > 0)
+            do m = 1, self%blocks(b)%n
+               if (self%blocks(b)%r(m)%id == i) then
+                  associate (hd => self%blocks(first))
+                     self%blocks(b)%r(m) = hd%r(hd%n)
+                     hd%n = hd%n - 1
+                     if (hd%n == 0) lv%head(cell) = hd%next
+                  end associate
+                  lv%count = lv%count - 1
+                  return
+               end if
+            end do
+            b = self%blocks(b)%next
+         end do
+      end associate
+   end subroutine remove
 
    !> Make room for n blocks (nothing changes when there is room already). Blocks of the pool
    !> are not written before use, so room reserved ahead costs address space, not memory: a caller

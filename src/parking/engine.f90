@@ -59,6 +59,7 @@ contains
       class(phase1_distributor_type), intent(in), optional :: dist
       type(kind_set_type) :: ks
       type(packing_type) :: pk
+      type(packing_params_type) :: pp
       type(attempt_params_type), allocatable :: ap(:)
       type(rsa_params_type) :: rp
       type(sieve_result_type), allocatable :: result(:)
@@ -71,16 +72,24 @@ contains
       if (allocated(error)) return
       call new_kind_set(ks, kinds, kind_params(cfg), model%shapes, model%shape_names, first_shape, nshape, &
                         cfg%sieves%order(:cfg%sieves%nsieve))
-      call new_packing(pk, packing_params(cfg), kinds)
+      rp = rsa_params(cfg, progress_unit, max_batch)
+      pp = packing_params(cfg)
+      if (present(dist)) then
+         allocate (rp%dist, source=dist)
+         rp%nthreads = dist%workers
+         ! the spatial decomposition parks by RSA; the dense strategy's sweeps move particles
+         ! anywhere, so it runs with replicated data (docs/mpi.md)
+         if (cfg%parking%strategy == parking_strategy%dense) rp%dist%spatial = .false.
+         if (rp%dist%spatial) then
+            pp%nslab = rp%dist%nslab
+            pp%slab = rp%dist%slab
+         end if
+      end if
+      call new_packing(pk, pp, kinds)
       allocate (ap(cfg%sieves%nsieve))
       do s = 1, cfg%sieves%nsieve
          ap(s) = attempt_params(cfg, ks, s)
       end do
-      rp = rsa_params(cfg, progress_unit, max_batch)
-      if (present(dist)) then
-         allocate (rp%dist, source=dist)
-         rp%nthreads = dist%workers
-      end if
       ! particles speculated per batch: any value gives the same model (anm_parking_scheduler),
       ! so the batch adapts to the machine and to the sieve (next_batch)
       run%batch = min(rp%nthreads, rp%batch_limit)

@@ -11,6 +11,14 @@
 !> Marks. `mark()` is the number of records so far; `fits(..., since=m)` tests only particles
 !> added or moved after mark m (the phase-2 re-check of a batch). A mark is invalid after `compact`.
 !>
+!> Slabs (the MPI build's spatial decomposition, `nslab` > 1). The particle arrays hold every
+!> particle (they are the model), the cell list only those a candidate centred in this process'
+!> slab (`owns`) can meet: a particle whose bounding sphere comes within `reach` (the largest
+!> bounding radius of a candidate to come, `set_reach`) of the slab. `add` inserts every particle;
+!> `localize` takes those out of reach out of the cell list again (after a batch: every process
+!> then decides the batch's re-checks alike). `fits` answers for candidates centred in the slab
+!> exactly as the whole packing would; for others it may miss overlaps.
+!>
 !> Usage:
 !>     call new_packing(pk, params, kinds)          ! kinds moved in (pk%kinds)
 !>     if (pk%fits(k, x, r, sc, scratch)) call pk%add(k, x, r, sc, sieve)
@@ -40,6 +48,8 @@ module anm_parking_packing
       integer :: mode = shell_mode%exclude
       !> Contact test parameters.
       type(contact_params_type) :: contact
+      !> Slabs along x (1: the whole box) and this process' slab (0-based).
+      integer :: nslab = 1, slab = 0
    end type packing_params_type
 
    !> Scratch of one thread for `fits` and `neighbours` (candidate ids and image shifts).
@@ -71,6 +81,8 @@ module anm_parking_packing
       !> (`cell_list_type%reorder`; doubled each time).
       integer :: next_reorder = first_reorder
       type(cell_list_type) :: cl
+      !> Slabs: the largest bounding radius of a candidate to come (mm).
+      real(wp) :: reach = 0.0_wp
    contains
       !> Add a particle.
       procedure :: add
@@ -90,6 +102,14 @@ module anm_parking_packing
       procedure :: neighbours
       !> Whether a candidate pose overlaps nothing.
       procedure :: fits
+      !> Whether a centre lies in this process' slab.
+      procedure :: owns
+      !> Whether particle i is within reach of this process' slab.
+      procedure :: in_region
+      !> Take the particles from `first` on that are out of reach out of the cell list.
+      procedure :: localize
+      !> Set the reach (the cell list is rebuilt when it grows).
+      procedure :: set_reach
    end type packing_type
 
    !> Initial capacity (particles).
@@ -172,8 +192,10 @@ contains
       integer, intent(in) :: i
       integer :: last
       last = self%np
-      self%owner(self%record(i)) = 0
-      self%ndead = self%ndead + 1
+      if (self%record(i) > 0) then
+         self%owner(self%record(i)) = 0
+         self%ndead = self%ndead + 1
+      end if
       if (i /= last) then
          self%center(:, i) = self%center(:, last)
          self%rot(:, :, i) = self%rot(:, :, last)
@@ -182,7 +204,7 @@ contains
          self%sieve(i) = self%sieve(last)
          self%kind_of(i) = self%kind_of(last)
          self%record(i) = self%record(last)
-         self%owner(self%record(i)) = i
+         if (self%record(i) > 0) self%owner(self%record(i)) = i
       end if
       self%np = last - 1
    end subroutine remove
@@ -197,8 +219,10 @@ contains
       real(wp), intent(in) :: x(3), rr(3, 3)
       !> New scale.
       real(wp), intent(in), optional :: sc
-      self%owner(self%record(i)) = 0
-      self%ndead = self%ndead + 1
+      if (self%record(i) > 0) then
+         self%owner(self%record(i)) = 0
+         self%ndead = self%ndead + 1
+      end if
       self%center(:, i) = x
       self%rot(:, :, i) = rr
       if (present(sc)) then
@@ -208,7 +232,8 @@ contains
       call insert_record(self, i)
    end subroutine move
 
-   !> Rebuild the cell list from the live particles (record i for particle i; marks are reset).
+   !> Rebuild the cell list from the live particles (record i for particle i with one slab; with
+   !> slabs, from the particles in reach; marks are reset).
    subroutine compact(self)
       !> Packing.
       class(packing_type), intent(inout) :: self
@@ -218,9 +243,13 @@ contains
       self%ndead = 0
       self%next_reorder = huge(1)
       do i = 1, self%np
-         call insert_record(self, i)
+         if (self%in_region(i)) then
+            call insert_record(self, i)
+         else
+            self%record(i) = 0
+         end if
       end do
-      if (self%np >= first_reorder) call self%cl%reorder()
+      if (self%nrecord >= first_reorder) call self%cl%reorder()
       self%next_reorder = max(first_reorder, merge(2 * self%nrecord, huge(1), self%nrecord < huge(1) / 2))
    end subroutine compact
 
@@ -292,6 +321,74 @@ contains
          shifts(:, n) = shifts(:, i)
       end do
    end subroutine neighbours
+
+   !> Whether centre x lies in this process' slab: slab floor(x_1 nslab / L_1), clamped to the box
+   !> (always true with one slab).
+   pure logical function owns(self, x)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Centre (mm).
+      real(wp), intent(in) :: x(3)
+      owns = .true.
+      if (self%p%nslab <= 1) return
+      owns = min(self%p%nslab - 1, max(0, floor(x(1) / self%p%box(1) * self%p%nslab))) == self%p%slab
+   end function owns
+
+   !> Whether particle i can meet a candidate centred in this process' slab: its centre lies within
+   !> reach + its bounding radius of the slab along x (periodic: either way round; a relative
+   !> margin of 1e-9 covers the rounding of the slab bounds). Always true with one slab.
+   pure logical function in_region(self, i)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Particle.
+      integer, intent(in) :: i
+      real(wp) :: lo, hi, x, d, lx
+      in_region = .true.
+      if (self%p%nslab <= 1) return
+      lx = self%p%box(1)
+      lo = lx * self%p%slab / self%p%nslab
+      hi = lx * (self%p%slab + 1) / self%p%nslab
+      x = self%center(1, i)
+      if (x >= lo .and. x <= hi) return
+      if (self%p%periodic) then
+         d = min(modulo(lo - x, lx), modulo(x - hi, lx))
+      else
+         d = max(lo - x, x - hi)
+      end if
+      in_region = d <= (self%reach + self%rho(i)) * (1.0_wp + 1.0e-9_wp) + 1.0e-9_wp * lx
+   end function in_region
+
+   !> Take particles first..np that are out of reach of this process' slab out of the cell list
+   !> (nothing with one slab).
+   subroutine localize(self, first)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> First particle to look at.
+      integer, intent(in) :: first
+      integer :: i
+      if (self%p%nslab <= 1) return
+      do i = max(1, first), self%np
+         if (self%record(i) == 0) cycle
+         if (self%in_region(i)) cycle
+         call self%cl%remove(self%record(i), self%center(:, i), self%rho(i))
+         self%owner(self%record(i)) = 0
+         self%record(i) = 0
+      end do
+   end subroutine localize
+
+   !> Set the reach: the largest bounding radius (mm) of the candidates to come. When it grows
+   !> (a sieve of larger particles, or a kind built later with a larger radius), the cell list is
+   !> rebuilt from the particles now in reach; a smaller reach keeps the records it has.
+   subroutine set_reach(self, r)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Reach (mm).
+      real(wp), intent(in) :: r
+      logical :: grown
+      grown = r > self%reach
+      self%reach = r
+      if (grown .and. self%p%nslab > 1 .and. self%np > 0) call self%compact()
+   end subroutine set_reach
 
    !> No overlap of a particle of kind kn at pose (x, rr, sc) with the walls (non-periodic) or any
    !> parked particle, as the shell mode says. With `since` (> 0), only the particles added or

@@ -156,23 +156,29 @@ contains
       end if
       if (rp%void) call start_void(vg, pk, ap, r_in)
       st%np_blocked = pk%np
+      ! slabs (spatial decomposition): the reach of this sieve's candidates; set every batch, as
+      ! lazy kinds may be built with a larger radius
+      if (pk%p%nslab > 1) pk%reach = 0.0_wp
       do while (st%res%vol < st%target .and. .not. st%done)
          if (rp%lazy) then
             call build_ahead(pk, ks, ap, rp, st, run%batch, error)
             if (allocated(error)) return
          end if
+         if (pk%p%nslab > 1) call pk%set_reach(sieve_reach(pk, ap))
          batch_now = run%batch
          ! void placement: a batch crosses an epoch boundary only while the grid is quiet (see
          ! void_epoch)
          if (rp%void .and. .not. st%grid_quiet) batch_now = min(batch_now, void_epoch - mod(st%nstream, void_epoch))
          nstream0 = st%nstream
          call system_clock(tp1)
-         call bt%speculate(batch_now, ap, pk, vg, st%nstream, rp%dist)
+         call bt%speculate(batch_now, ap, pk, vg, st%nstream, rp%dist, window(st))
          call system_clock(t1)
          seconds = real(t1 - tp1, wp) / run%rate
          ! every process sizes the next batch alike
          if (allocated(rp%dist)) seconds = rp%dist%agree(seconds)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
+         ! slabs: the batch's particles out of this process' reach leave its cell list
+         call pk%localize(bt%np_frozen + 1)
          call reserve_ahead(pk, st)
          if (rp%void .and. mod(st%nstream, void_epoch) == 0 .and. pk%np > st%np_blocked) then
             call advance_void(vg, pk, st, changed)
@@ -234,7 +240,11 @@ contains
             if (changed .or. st%done) exit
          end if
          st%nstream = st%nstream + 1
-         call bt%settle(b, ap, pk, vg, scratch)
+         if (allocated(rp%dist)) then
+            call bt%settle(b, ap, pk, vg, scratch, rp%dist, window(st))
+         else
+            call bt%settle(b, ap, pk, vg, scratch)
+         end if
          associate (a => bt%at(b))
             run%attempts = run%attempts + a%count - merge(1, 0, a%done)
             st%attempts = st%attempts + a%count - merge(1, 0, a%done)
@@ -271,6 +281,24 @@ contains
          end associate
       end do
    end subroutine settle_batch
+
+   !> First window of a spatial search (anm_parking_scheduler): the sieve's attempts per particle
+   !> so far (any value gives the same attempts; this one wastes few draws and reductions).
+   pure integer function window(st)
+      type(sieve_state_type), intent(in) :: st
+      window = int(min(1024_i8, max(1_i8, st%attempts / max(1, st%res%count + st%failures))))
+   end function window
+
+   !> The largest bounding radius (mm) of a candidate of the sieve, over its kinds built so far.
+   pure real(wp) function sieve_reach(pk, ap) result(r)
+      type(packing_type), intent(in) :: pk
+      type(attempt_params_type), intent(in) :: ap
+      integer :: k
+      r = 0.0_wp
+      do k = ap%first_kind, ap%first_kind + ap%nkind - 1
+         if (pk%kinds(k)%width > 0.0_wp) r = max(r, ap%max_width / pk%kinds(k)%width * pk%kinds(k)%r_out)
+      end do
+   end function sieve_reach
 
    !> Room in the packing for the particles the sieve will probably still park (the missing volume
    !> over the mean particle volume so far, plus 2 %), once the mean is known (1,000 particles):

@@ -18,17 +18,26 @@
 !>     n = next_batch(n, seconds, missing, vol, count, nthreads)
 !>
 !> Phase 1 may also run on several processes: a `phase1_distributor_type` (the MPI build's
-!> anm_mpi_distributor, mpi/src/) gives each process some members (`run_phase1` with a first
-!> member and a stride) and leaves every member's attempt on every process as one process would.
+!> anm_mpi_distributor, mpi/src/) leaves every member's attempt on every process as one process
+!> would, in one of two ways:
+!> - replicated: every process holds the whole packing and runs some members (`run_phase1` with a
+!>   first member and a stride); the attempts are then gathered;
+!> - spatial (`spatial_search`): process r owns slab r of equal slabs along x and holds only the
+!>   particles a candidate centred in its slab can meet (`packing_type%localize`). Every process
+!>   draws every attempt of every member (draws are cheap) in windows of attempts, tests only the
+!>   attempts centred in its slab, and stops at its first fit; the member's first fitting attempt
+!>   is the smallest over the processes (`agree_first`): every earlier attempt was tested by its
+!>   owner and did not fit. Every process then replays the member's stream to that attempt. The
+!>   continuation of a member hit in phase 2 is searched the same way (`settle` with `dist`).
 module anm_parking_scheduler
-   use anm_core_kinds, only: wp
+   use anm_core_kinds, only: wp, i8
    use anm_parking_attempts, only: attempt_type, attempt_params_type
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_void_grid, only: void_grid_type
    implicit none
    private
 
-   public :: batch_type, next_batch, first_in_reach, run_phase1, phase1_distributor_type
+   public :: batch_type, next_batch, first_in_reach, run_phase1, phase1_distributor_type, spatial_search
 
    !> One batch of speculated particles.
    type :: batch_type
@@ -64,16 +73,23 @@ module anm_parking_scheduler
       integer :: workers = 1
       !> This process writes the outputs and progress lines.
       logical :: writer = .true.
+      !> Spatial decomposition: this process owns slab `slab` (0-based) of `nslab` along x, its
+      !> packing is local (`packing_params_type%nslab`), and the attempts are searched with
+      !> `spatial_search`; else replicated data.
+      logical :: spatial = .false.
+      integer :: nslab = 1, slab = 0
    contains
       !> Phase 1 of the batch `at` on every process (collective).
       procedure(distributed_phase1), deferred :: phase1
       !> The largest value over the processes (collective): values that steer the run, such as
       !> the batch clock, must agree.
       procedure(agreed_value), deferred :: agree
+      !> The smallest of each value over the processes, in place (collective; spatial mode).
+      procedure(agreed_first), deferred :: agree_first
    end type phase1_distributor_type
 
    abstract interface
-      subroutine distributed_phase1(self, at, ap, pk, vg, nstream)
+      subroutine distributed_phase1(self, at, ap, pk, vg, nstream, window)
          import :: phase1_distributor_type, attempt_type, attempt_params_type, packing_type, void_grid_type
          !> Distributor.
          class(phase1_distributor_type), intent(in) :: self
@@ -87,7 +103,17 @@ module anm_parking_scheduler
          type(void_grid_type), intent(in) :: vg
          !> Particles of the sieve before this batch.
          integer, intent(in) :: nstream
+         !> Attempts of the first window (spatial mode).
+         integer, intent(in) :: window
       end subroutine distributed_phase1
+
+      subroutine agreed_first(self, k)
+         import :: phase1_distributor_type, i8
+         !> Distributor.
+         class(phase1_distributor_type), intent(in) :: self
+         !> This process' values; on return the smallest over the processes.
+         integer(i8), intent(inout) :: k(:)
+      end subroutine agreed_first
 
       function agreed_value(self, x) result(y)
          import :: phase1_distributor_type, wp
@@ -103,7 +129,7 @@ contains
 
    !> Phase 1: particles nstream + 1 .. nstream + n of the sieve each find their first attempt that
    !> fits the packing as it is (in parallel; each particle draws only from its own stream).
-   subroutine speculate(self, n, ap, pk, vg, nstream, dist)
+   subroutine speculate(self, n, ap, pk, vg, nstream, dist, window)
       !> Batch.
       class(batch_type), intent(out) :: self
       !> Number of particles.
@@ -118,13 +144,18 @@ contains
       integer, intent(in) :: nstream
       !> Phase 1 spread over processes (absent: this process alone).
       class(phase1_distributor_type), intent(in), optional :: dist
+      !> Attempts of the first window of a spatial search (default 1; any value gives the same
+      !> attempts).
+      integer, intent(in), optional :: window
       real(wp), allocatable :: bx(:, :)
-      integer :: b
+      integer :: b, w
       self%n = n
       allocate (self%at(n), self%br(n), self%alone(n), self%moved_flag(n), self%moved(n), bx(3, n))
       self%moved_flag = .false.
+      w = 1
+      if (present(window)) w = max(1, window)
       if (present(dist)) then
-         call dist%phase1(self%at, ap, pk, vg, nstream)
+         call dist%phase1(self%at, ap, pk, vg, nstream, w)
       else
          call run_phase1(self%at, ap, pk, vg, nstream, 1, 1)
       end if
@@ -168,10 +199,87 @@ contains
       !$omp end parallel do
    end subroutine run_phase1
 
+   !> The spatial search (see the module's notes) of members `list` of `at`, each from its current
+   !> attempt on (started, or hit in phase 2; that attempt is not tested again): on return each is
+   !> at its first attempt that fits the whole packing, or done, on every process alike
+   !> (collective: every process calls it with the same members). Windows of attempts: `window`
+   !> (default 1), then doubling for the members still searching, so that the attempts drawn
+   !> past the first fit are at most about as many as those before it.
+   subroutine spatial_search(at, list, ap, pk, vg, window, dist)
+      !> Attempts.
+      type(attempt_type), intent(inout) :: at(:)
+      !> Members to search.
+      integer, intent(in) :: list(:)
+      !> Parameters of the sieve.
+      type(attempt_params_type), intent(in) :: ap
+      !> This process' packing (local: `packing_type%localize`).
+      type(packing_type), intent(in) :: pk
+      !> Void grid (void placement).
+      type(void_grid_type), intent(in) :: vg
+      !> Attempts in the first window (default 1).
+      integer, intent(in), optional :: window
+      !> Processes.
+      class(phase1_distributor_type), intent(in) :: dist
+      integer, allocatable :: act(:)
+      integer(i8), allocatable :: kfit(:)
+      type(attempt_type), allocatable :: saved(:)
+      integer :: w, i, j, n, nk
+      integer(i8), parameter :: none = huge(1_i8)
+      w = 1
+      if (present(window)) w = max(1, window)
+      act = list
+      do while (size(act) > 0)
+         n = size(act)
+         saved = at(act)
+         allocate (kfit(n))
+         !$omp parallel do default(none) shared(at, act, ap, pk, vg, kfit, n, w) private(i, j) schedule(dynamic, 1)
+         do i = 1, n
+            block
+               type(fit_scratch_type) :: scratch
+               kfit(i) = none
+               associate (a => at(act(i)))
+                  do j = 1, w
+                     call a%next(ap, pk%kinds, vg)
+                     if (a%done) exit
+                     if (.not. pk%owns(a%c)) cycle
+                     if (pk%fits(a%k, a%c, a%r, a%sc, scratch)) then
+                        kfit(i) = a%count
+                        exit
+                     end if
+                  end do
+               end associate
+            end block
+         end do
+         !$omp end parallel do
+         call dist%agree_first(kfit)
+         nk = 0
+         do i = 1, n
+            associate (a => at(act(i)))
+               if (kfit(i) < none) then
+                  ! another process' attempt fits first: replay the draws to it
+                  if (a%count /= kfit(i)) then
+                     a = saved(i)
+                     do while (a%count < kfit(i))
+                        call a%next(ap, pk%kinds, vg)
+                     end do
+                  end if
+               else if (.not. a%done) then
+                  ! no fit in this window on any process (every process drew the whole window)
+                  nk = nk + 1
+                  act(nk) = act(i)
+               end if
+            end associate
+         end do
+         act = act(:nk)
+         deallocate (kfit)
+         w = min(2 * w, 2**20)
+      end do
+   end subroutine spatial_search
+
    !> Phase 2 for particle b (after every earlier particle of the batch was settled and parked or
    !> not): its attempt is re-checked against the particles parked since phase 1 when it may meet
    !> one, and if it overlaps, its sequence continues against the whole packing.
-   subroutine settle(self, b, ap, pk, vg, scratch)
+   subroutine settle(self, b, ap, pk, vg, scratch, dist, window)
       !> Batch.
       class(batch_type), intent(inout) :: self
       !> Particle of the batch.
@@ -184,13 +292,25 @@ contains
       type(void_grid_type), intent(in) :: vg
       !> Scratch for the overlap tests.
       type(fit_scratch_type), intent(inout) :: scratch
+      !> Processes (a spatial one searches the continuation over all; collective then).
+      class(phase1_distributor_type), intent(in), optional :: dist
+      !> First window of that search (default 1).
+      integer, intent(in), optional :: window
       associate (a => self%at(b))
          if (a%done) return
          if (self%alone(b)) then
             if (.not. near_moved(self, b, pk)) return
          end if
+         ! every process holds the particles parked since phase 1 (`localize` runs after the
+         ! batch), so every process decides this alike
          if (pk%fits(a%k, a%c, a%r, a%sc, scratch, since=self%frozen)) return
          self%moved_flag(b) = .true.
+         if (present(dist)) then
+            if (dist%spatial) then
+               call spatial_search(self%at, [b], ap, pk, vg, window, dist)
+               return
+            end if
+         end if
          do
             call a%next(ap, pk%kinds, vg)
             if (a%done) exit
