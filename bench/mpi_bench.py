@@ -1,5 +1,5 @@
 """Benchmarks of the MPI build (docs/mpi.md): a job run by the serial program on 1 thread and by
-the MPI build with ranks x threads = 1x2 and 2x1 (CPU and wall time with GNU time, the bytes
+the MPI build with ranks x threads = 1x2 and 2x1 (slabs, the default) and 2x1 with `--replicated` (CPU and wall time with GNU time, the bytes
 communicated per sieve and batch and the peak memory per rank from `anm run --comm-stats`, the
 models compared dataset by dataset), and the halo fraction per slab subdomain size computed from
 the model: for n slabs of width L/n along x and each sieve s, the particles of sieves 1..s outside
@@ -10,7 +10,8 @@ of sieves 1..s it owns.
 Usage (from the repository root; builds with scripts/build.sh and scripts/build_mpi.sh first):
 
     python3 bench/mpi_bench.py [--job inputs/msand.nml] [--slabs 2 4 8 16 32 64] [--halo-only MODEL.h5]
-    python3 bench/mpi_bench.py --project CPU PHASE1_CPU PARTICLES PEAK_MB   # the scaling model only
+                               [--serial-threads 2] [--no-halo]
+    python3 bench/mpi_bench.py --project CPU PHASE1_CPU PARTICLES PEAK_MB SLAB_SHARE   # the scaling model only
 
 Prints markdown tables (pasted into docs/mpi.md). Jobs with ../shared/shapes need the folder.
 """
@@ -28,17 +29,24 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-MPIRUN = "mpirun --allow-run-as-root --oversubscribe"
+# Open MPI binds each rank to one core when there are at most 2 ranks: a rank's threads would share
+# that core (1x2 ran at one core's speed), hence --bind-to none
+MPIRUN = "mpirun --allow-run-as-root --oversubscribe --bind-to none"
+# anm_post (the halo table reads the model with it)
+sys.path.insert(0, str(ROOT / "post"))
 
 
-def timed(cmd: str, threads: int) -> tuple[float, float, str, str, int]:
-    """Wall and CPU (user + system) seconds, stdout, stderr and exit code of a shell command."""
+def timed(cmd: str, threads: int) -> tuple[float, float, str, str, int, float]:
+    """Wall and CPU (user + system) seconds, stdout, stderr, exit code and the largest peak resident
+    memory (MB) of one process of a shell command (GNU time's %M: the largest over the processes
+    it waited for, so one rank's peak under mpirun)."""
     env = dict(os.environ, OMP_NUM_THREADS=str(threads))
     with tempfile.NamedTemporaryFile("r", suffix=".time") as tf:
-        p = subprocess.run(f"/usr/bin/time -f '%e %U %S' -o {tf.name} bash -c {shlex.quote(cmd)}", shell=True,
+        p = subprocess.run(f"/usr/bin/time -f '%e %U %S %M' -o {tf.name} bash -c {shlex.quote(cmd)}", shell=True,
                            cwd=ROOT, env=env, capture_output=True, text=True)
         fields = tf.read().strip().splitlines()[-1].split()
-    return float(fields[0]), float(fields[1]) + float(fields[2]), p.stdout, p.stderr, p.returncode
+    return (float(fields[0]), float(fields[1]) + float(fields[2]), p.stdout, p.stderr, p.returncode,
+            float(fields[3]) / 1024.0)
 
 
 def job_copy(job: Path, out: Path) -> Path:
@@ -120,12 +128,13 @@ def block_halo(edges: list[float], reach: float) -> float:
     return 2.0 * reach * sum(1.0 / a for a in edges)
 
 
-def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, cores_per_node: int = 64,
-               ranks_per_node: int = 2, efficiency: float = 0.8, decision_share: float = 0.1,
-               reach: float = 0.56) -> str:
+def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_share: float,
+               cores_per_node: int = 64, ranks_per_node: int = 2, efficiency: float = 0.8,
+               decision_share: float = 0.1, reach: float = 0.56, array_bytes: float = 128.0) -> str:
     """The scaling model of docs/mpi.md from measured figures: CPU seconds of the job on one rank
-    and one thread, the phase-1 CPU seconds within it (`--comm-stats`), its particle count and
-    peak memory per rank."""
+    and one thread, the phase-1 CPU seconds within it when replicated (`--comm-stats`), its particle
+    count and peak memory per rank, and the share of the one-core time that every rank repeats
+    with slabs (measured: a rank's CPU outside phase 1 over the one-core CPU)."""
     per_particle = cpu1 / n_ref
     rho = 1.0 - phase1 / cpu1
     volume = 100.0 ** 3
@@ -136,23 +145,31 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, cores_per
     n = sum(counts)
     work = n * per_particle
     mem_gb = peak_mb * n / n_ref / 1024.0
-    lines = [f"Measured: {per_particle * 1e6:.0f} us CPU per particle (one rank, one thread), phase 1 "
-             f"{1 - rho:.2f} of it, the rest (rho = {rho:.2f}) repeated by every rank today; the 100 mm concrete "
-             f"cube to 0.15 mm: {n / 1e6:.1f} million particles "
+    arrays_gb = array_bytes * n / 1024.0 ** 3
+    lines = [f"Measured: {per_particle * 1e6:.0f} us CPU per particle (one rank, one thread); replicated, phase 1 "
+             f"is {1 - rho:.2f} of it and the rest (rho = {rho:.2f}) is repeated by every rank; with slabs, every "
+             f"rank repeats {slab_share:.2f}. The 100 mm concrete cube to 0.15 mm: {n / 1e6:.1f} million particles "
              f"({', '.join(f'{c:,.0f}' for c in counts)} per sieve, coarse to fine), {work / 60:.0f} min CPU at "
-             f"that cost; the whole model's memory about {mem_gb:.0f} GB.", "",
-             "| nodes | ranks x threads | today: replicated | designed: subdomains | memory per rank, today / designed (blocks, halo) |",
-             "|---:|---:|---:|---:|---:|"]
+             f"that cost; the whole model's memory about {mem_gb:.0f} GB, of which the particle arrays "
+             f"{arrays_gb:.1f} GB.", "",
+             "| nodes | ranks x threads | replicated | slabs (built) | designed: blocks, divided arrays and kinds | "
+             "memory per rank: replicated / slabs (halo) / designed (blocks, halo) |",
+             "|---:|---:|---:|---:|---:|---:|"]
     blocks = {1: [50.0, 100.0, 100.0], 8: [25.0, 50.0, 50.0], 64: [12.5, 25.0, 25.0]}
     for nodes in (1, 8, 64):
         cores = nodes * cores_per_node
         ranks = ranks_per_node * nodes
-        t_rep = rho * work + (1 - rho) * work / (cores * efficiency)
-        t_sp = decision_share * rho * work + (1 - decision_share * rho) * work / (cores * efficiency)
+        spread = cores * efficiency
+        t_rep = rho * work + (1 - rho) * work / spread
+        t_slab = slab_share * work + (1 - slab_share) * work / spread
+        t_sp = decision_share * rho * work + (1 - decision_share * rho) * work / spread
         h = block_halo(blocks[nodes], reach)
+        h_slab = 2.0 * reach / (100.0 / ranks)
+        mem_slab = arrays_gb + (mem_gb - arrays_gb) / ranks * (1 + h_slab)
         mem_sp = mem_gb / ranks * (1 + h)
-        lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {t_rep / 60:.1f} min | {t_sp / 60:.2f} min | "
-                     f"{mem_gb:.0f} GB / {mem_sp:.2f} GB ({' x '.join(f'{e:g}' for e in blocks[nodes])} mm, {h:.2f}) |")
+        lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {t_rep / 60:.1f} min | {t_slab / 60:.1f} min | "
+                     f"{t_sp / 60:.2f} min | {mem_gb:.0f} GB / {mem_slab:.1f} GB ({h_slab:.2f}) / {mem_sp:.2f} GB "
+                     f"({' x '.join(f'{e:g}' for e in blocks[nodes])} mm, {h:.2f}) |")
     return "\n".join(lines)
 
 
@@ -162,13 +179,16 @@ def main() -> int:
     ap.add_argument("--anm", default=str(ROOT / "build/install/bin/anm"))
     ap.add_argument("--anm-mpi", default=str(ROOT / "build/install-mpi/bin/anm"))
     ap.add_argument("--slabs", type=int, nargs="+", default=[2, 4, 8, 16, 32, 64])
+    ap.add_argument("--serial-threads", type=int, default=1, help="threads of the serial run (default 1)")
+    ap.add_argument("--no-halo", action="store_true", help="skip the halo table (large models)")
     ap.add_argument("--halo-only", help="only the halo table of this model file")
-    ap.add_argument("--project", type=float, nargs=4, metavar=("CPU", "PHASE1_CPU", "PARTICLES", "PEAK_MB"),
-                    help="only the scaling model from a 1x1 run's figures (anm run --comm-stats)")
+    ap.add_argument("--project", type=float, nargs=5,
+                    metavar=("CPU", "PHASE1_CPU", "PARTICLES", "PEAK_MB", "SLAB_SHARE"),
+                    help="only the scaling model from measured figures (docs/mpi.md)")
     args = ap.parse_args()
     if args.project:
-        c1, c2, n_ref, peak = args.project
-        print(projection(c1, c2, int(n_ref), peak))
+        c1, c2, n_ref, peak, share = args.project
+        print(projection(c1, c2, int(n_ref), peak, share))
         return 0
     if args.halo_only:
         print(halo_table(Path(args.halo_only), args.slabs))
@@ -178,36 +198,41 @@ def main() -> int:
     # the serial program on 1 thread: CPU(2x1) - CPU(serial) is the work every rank repeats
     runs = [("serial", 1, 1, f"{shlex.quote(args.anm)} run {{nml}}"),
             ("MPI 1x2", 1, 2, f"{MPIRUN} -np 1 {shlex.quote(args.anm_mpi)} run {{nml}} --comm-stats"),
-            ("MPI 2x1", 2, 1, f"{MPIRUN} -np 2 {shlex.quote(args.anm_mpi)} run {{nml}} --comm-stats")]
+            ("MPI 2x1", 2, 1, f"{MPIRUN} -np 2 {shlex.quote(args.anm_mpi)} run {{nml}} --comm-stats"),
+            ("MPI 2x1 replicated", 2, 1,
+             f"{MPIRUN} -np 2 {shlex.quote(args.anm_mpi)} run {{nml}} --comm-stats --replicated")]
+    if args.serial_threads != 1:
+        runs[0] = (f"serial {args.serial_threads} threads", 1, args.serial_threads, runs[0][3])
     load = os.getloadavg()[0]
     print(f"Job: `{args.job}`; load average before: {load:.1f} on {os.cpu_count()} cores\n")
-    print("| run | ranks x threads | wall (s) | CPU (s) | particles | model = serial |")
-    print("|---|---:|---:|---:|---:|---|")
+    print("| run | ranks x threads | wall (s) | CPU (s) | peak per process (MB) | particles | model = serial |")
+    print("|---|---:|---:|---:|---:|---:|---|")
     stats = {}
     models = {}
     for label, ranks, threads, cmd in runs:
         out = tmp / label.replace(" ", "_")
         nml = job_copy(job, out)
-        wall, cpu, so, se, rc = timed(cmd.format(nml=shlex.quote(str(nml))), threads)
+        wall, cpu, so, se, rc, peak = timed(cmd.format(nml=shlex.quote(str(nml))), threads)
         if rc != 0:
-            print(f"| {label} | {ranks}x{threads} | failed (exit {rc}) | | | |")
+            print(f"| {label} | {ranks}x{threads} | failed (exit {rc}) | | | | |")
             print(se[-2000:], file=sys.stderr)
             continue
-        models[label] = out / model_name(nml)
+        models["serial" if label.startswith("serial") else label] = out / model_name(nml)
         m = re.search(r"^total\s+\S+\s+\S+\s+(\d+)", so, re.M)
         same = "-"
-        if label != "serial" and "serial" in models:
+        if not label.startswith("serial") and "serial" in models:
             c = subprocess.run([sys.executable, str(ROOT / "scripts/compare_models.py"), str(models["serial"]),
                                 str(models[label]), "--skip", "run/namelist", "--skip", "run/resolved_namelist",
                                 "--ignore", "wall_time", "--ignore", "threads", "--ignore", "program_version"],
                                capture_output=True, text=True)
             same = "yes" if c.returncode == 0 else "**no**"
-        print(f"| {label} | {ranks}x{threads} | {wall:.1f} | {cpu:.1f} | {m.group(1) if m else '?'} | {same} |")
+        print(f"| {label} | {ranks}x{threads} | {wall:.1f} | {cpu:.1f} | {peak:.0f} | {m.group(1) if m else '?'} | "
+              f"{same} |", flush=True)
         stats[label] = [line for line in se.splitlines() if line.startswith("mpi:")]
     for label, lines in stats.items():
         if lines:
             print(f"\n`--comm-stats` of {label}:\n\n    " + "\n    ".join(lines))
-    if "serial" in models:
+    if "serial" in models and not args.no_halo:
         print(f"\nHalo fraction (halo particles / owned particles, slabs along x) of the model:\n")
         print(halo_table(models["serial"], args.slabs))
     return 0

@@ -29,6 +29,8 @@ module anm_mpi_distributor
    use anm_parking_packing, only: packing_type
    use anm_parking_void_grid, only: void_grid_type
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1, spatial_search
+   use anm_parking_kinds, only: kind_exchange_type
+   use anm_mpi_kinds, only: mpi_kinds_type, new_mpi_kinds
    use mpi_f08, only: MPI_Comm, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE
@@ -51,6 +53,9 @@ module anm_mpi_distributor
       integer :: attempt_bytes = 0
       !> Spatial mode: the first-fit reductions (windows) and their bytes, per run.
       integer(int64) :: windows = 0, window_bytes = 0
+      !> Spatial mode, per sieve (at its end): particles in this process' cell list and in the
+      !> packing (0: not recorded).
+      integer :: slab_local(64) = 0, slab_total(64) = 0
       !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
       !> the gathers (s).
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
@@ -68,6 +73,8 @@ module anm_mpi_distributor
       procedure :: phase1
       procedure :: agree
       procedure :: agree_first
+      procedure :: note_slab
+      procedure :: kinds_exchange
    end type mpi_distributor_type
 
 contains
@@ -209,6 +216,32 @@ contains
       end if
    end subroutine agree_first
 
+   !> The kinds built in shares by the processes of the communicator (anm_mpi_kinds).
+   subroutine kinds_exchange(self, kx)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> Exchange.
+      class(kind_exchange_type), allocatable, intent(out) :: kx
+      type(mpi_kinds_type) :: m
+      call new_mpi_kinds(m, self%comm)
+      allocate (kx, source=m)
+   end subroutine kinds_exchange
+
+   !> Record, at the end of a sieve, the particles in this process' cell list (its slab and halo)
+   !> and in the packing (counting only).
+   subroutine note_slab(self, sieve, nlocal, np)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> Sieve that ended.
+      integer, intent(in) :: sieve
+      !> Particles in this process' cell list, and in the packing.
+      integer, intent(in) :: nlocal, np
+      if (.not. associated(self%stats)) return
+      if (sieve < 1 .or. sieve > size(self%stats%slab_local)) return
+      self%stats%slab_local(sieve) = nlocal
+      self%stats%slab_total(sieve) = np
+   end subroutine note_slab
+
    !> Count one batch of n members of `bytes` each (nothing is communicated on one process).
    subroutine record_batch(st, sieve, n, bytes, nranks)
       type(comm_stats_type), intent(inout) :: st
@@ -244,6 +277,7 @@ contains
       integer(int64), allocatable :: b(:)
       integer, allocatable :: nm(:)
       real :: cpu
+      integer :: slab_lo(64), slab_hi(64)
       character(len=*), parameter :: fmt_sieve = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
                                      '" members, ",i0," bytes gathered to each rank (per batch min/median/max ",' // &
                                      'i0,"/",i0,"/",i0,")")'
@@ -251,6 +285,10 @@ contains
                                       '" members, ",i0," bytes reduced by each rank (per batch min/median/max ",' // &
                                       'i0,"/",i0,"/",i0,")")'
       mem = peak_memory_kb()
+      if (associated(dist%stats)) then
+         call MPI_Allreduce(dist%stats%slab_local, slab_lo, size(slab_lo), MPI_INTEGER, MPI_MIN, dist%comm)
+         call MPI_Allreduce(dist%stats%slab_local, slab_hi, size(slab_hi), MPI_INTEGER, MPI_MAX, dist%comm)
+      end if
       call MPI_Allreduce(mem, lo, 1, MPI_INTEGER8, MPI_MIN, dist%comm)
       call MPI_Allreduce(mem, hi, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
       call MPI_Allreduce(mem, sum_mem, 1, MPI_INTEGER8, MPI_SUM, dist%comm)
@@ -285,6 +323,13 @@ contains
                    '"the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, total, st%attempt_bytes, &
                st%reductions, dist%nranks, dist%workers / dist%nranks
          end if
+         do s = 1, size(slab_lo)
+            if (st%slab_total(s) == 0) cycle
+            write (unit, '("mpi: sieve ",i0," end: each rank''s cell list holds ",i0," to ",i0," of the ",i0,' // &
+                   '" particles (slab and halo; ",f0.3," to ",f0.3," of them, 1/ranks = ",f0.3,")")') s, slab_lo(s), &
+               slab_hi(s), st%slab_total(s), real(slab_lo(s)) / st%slab_total(s), real(slab_hi(s)) / st%slab_total(s), &
+               1.0 / dist%nranks
+         end do
          call cpu_time(cpu)
          write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
                 '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu

@@ -229,7 +229,8 @@ SLAB_JOBS = {
 @pytest.mark.parametrize("job", sorted(SLAB_JOBS))
 def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp_path):
     """The serial model for 2 and 3 ranks in slabs and for 2 ranks with replicated data
-    (`--replicated`), dataset by dataset (scripts/compare_models.py). The first job's last sieve
+    (`--replicated`), dataset by dataset (scripts/compare_models.py), with the kinds built in
+    shares by the ranks and exchanged. The first job's last sieve
     exhausts attempts (particles not parked), which ends a spatial search with no fit anywhere."""
     def write(out):
         out.mkdir()
@@ -249,5 +250,8 @@ def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp
         res = run_mpi(mpi_bin, ranks, 1, ["run", str(nml), "--comm-stats"] + extra)
         assert res.returncode == 0, res.stdout + res.stderr
         assert ("first-fit reductions" in res.stderr) == (not extra), res.stderr
+        # the kinds were built in shares: rank 0 received some from the others
+        shares = rf"kinds: built in shares by {ranks} processes: \d+ parts \(bodies, shells\) built by this one, "
+        assert re.search(shares + r"[1-9]\d* received", res.stderr), res.stderr
         cmp = compare(tmp_path / "serial" / "model.h5", out / "model.h5")
         assert cmp.returncode == 0, f"{ranks} ranks {extra}:\n" + cmp.stdout + cmp.stderr

@@ -85,6 +85,15 @@ contains
             pp%slab = rp%dist%slab
          end if
       end if
+      ! the MPI build: the processes build the kinds in shares and exchange them; the on-disk
+      ! cache is then not used (its hits could differ between the processes, which must build
+      ! the same lists together)
+      if (present(dist)) then
+         call dist%kinds_exchange(ks%exchange)
+         if (allocated(ks%exchange)) then
+            if (ks%exchange%nranks > 1) ks%cache%on = .false.
+         end if
+      end if
       call new_packing(pk, pp, kinds)
       allocate (ap(cfg%sieves%nsieve))
       do s = 1, cfg%sieves%nsieve
@@ -191,6 +200,11 @@ contains
          write (unit, '(a,i0,a,i0,a,f0.2,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
             real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (shell contact body ", &
             real(shell, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
+      end if
+      if (allocated(ks%exchange)) then
+         if (ks%exchange%nranks > 1) write (unit, '(a,i0,a,i0,a,i0,a)') "kinds: built in shares by ", &
+            ks%exchange%nranks, " processes: ", ks%exchange%built, " parts (bodies, shells) built by this one, ", &
+            ks%exchange%received, " received from the others (the kind cache is not used)"
       end if
       if (ks%cache%on) then
          write (unit, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a,i0,a)') "kinds: ", ks%bases_built, " bases and ", ks%shells_built, &

@@ -5,6 +5,8 @@
 !> levels, which differ only in their shells). With exclusion shells a kind keeps only its shell
 !> contact body's patch arrays (`bare_patches`). With p%cache_directory (ANM_CACHE) the bases and
 !> shells are read from and written to an on-disk cache (anm_parking_kind_cache, docs/shells.md).
+!> With an `exchange` (the MPI build), the processes build the kinds of a list in shares and send
+!> each other what they built, in the cache's payload format.
 !>
 !> The kinds of sieve s are `first(s) .. first(s) + count(s) - 1`: `nlev` blocks (width levels,
 !> shells in mm) of the sieve's shapes.
@@ -29,7 +31,7 @@ module anm_parking_kinds
    private
 
    public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, cache_environment, kind_bytes, &
-      & body_bytes
+      & body_bytes, kind_exchange_type
 
    !> Discrete widths per sieve when shell thickness is given in mm.
    integer, parameter :: width_levels = 8
@@ -84,6 +86,32 @@ module anm_parking_kinds
       character(len=:), allocatable :: cache_directory
    end type kind_params_type
 
+   !> Kinds built by several processes (the MPI build's anm_mpi_kinds): process `rank` of `nranks`
+   !> builds items rank + 1, rank + 1 + nranks, ... of each list of kinds to build, and sends each
+   !> (its payload) to the others with `broadcast`, one item at a time (so that at most one
+   !> item's bytes are held beside the kinds).
+   type, abstract :: kind_exchange_type
+      !> Processes and this process (0-based).
+      integer :: nranks = 1, rank = 0
+      !> Kinds built here and received from the others (counters).
+      integer :: built = 0, received = 0
+   contains
+      !> Process root's bytes to every process (collective).
+      procedure(broadcast_bytes), deferred :: broadcast
+   end type kind_exchange_type
+
+   abstract interface
+      subroutine broadcast_bytes(self, root, b)
+         import :: kind_exchange_type, int8
+         !> Exchange.
+         class(kind_exchange_type), intent(in) :: self
+         !> Sending process.
+         integer, intent(in) :: root
+         !> The bytes: given on root, received (allocated) on the others.
+         integer(int8), allocatable, intent(inout) :: b(:)
+      end subroutine broadcast_bytes
+   end interface
+
    !> Bookkeeping of the kinds of a run.
    type :: kind_set_type
       !> Parameters.
@@ -105,6 +133,8 @@ module anm_parking_kinds
       type(kind_cache_type) :: cache
       !> Bases (geometry and bare body) and shells built here (not read from the cache).
       integer :: bases_built = 0, shells_built = 0
+      !> Processes sharing the building (the MPI build; unallocated: this process builds all).
+      class(kind_exchange_type), allocatable :: exchange
    contains
       !> Build the kinds of a list that are not built yet.
       procedure :: build
@@ -232,7 +262,7 @@ contains
                   if (self%cache%on) call load_base(self, kinds(bases(i)), hit(i))
                end do
                fresh = pack(bases, .not. hit)
-               call build_list(self, kinds, fresh, .true., error)
+               call build_shared(self, kinds, fresh, .true., error)
                if (allocated(error)) return
                self%bases_built = self%bases_built + size(fresh)
                do i = 1, size(fresh)
@@ -258,7 +288,7 @@ contains
                   if (self%cache%on) call load_shells(self, kinds(todo(i)), hit(i))
                end do
                fresh = pack(todo, .not. hit)
-               call build_list(self, kinds, fresh, .false., error)
+               call build_shared(self, kinds, fresh, .false., error)
                if (allocated(error)) return
                self%shells_built = self%shells_built + size(fresh)
                do i = 1, size(fresh)
@@ -284,6 +314,65 @@ contains
          self%built(k) = .true.
       end do
    end subroutine build
+
+   !> Build kinds(list) (`bases` or shells, as build_list): all here, or with an exchange, this
+   !> process' share (items rank + 1, rank + 1 + nranks, ...) here and the others' received from
+   !> them, one item (its cache payload) at a time. A process that fails to build returns its
+   !> error, and the MPI program aborts the job.
+   subroutine build_shared(ks, kinds, list, bases, error)
+      type(kind_set_type), intent(inout) :: ks
+      type(particle_kind_type), intent(inout) :: kinds(:)
+      integer, intent(in) :: list(:)
+      logical, intent(in) :: bases
+      type(error_type), allocatable, intent(out) :: error
+      type(byte_writer_type) :: item
+      type(byte_reader_type) :: r
+      integer(int8), allocatable :: b(:)
+      integer :: i, owner, nranks
+      logical :: ok
+      character(len=80) :: msg
+      if (.not. allocated(ks%exchange)) then
+         call build_list(ks, kinds, list, bases, error)
+         return
+      end if
+      if (ks%exchange%nranks <= 1 .or. size(list) == 0) then
+         call build_list(ks, kinds, list, bases, error)
+         return
+      end if
+      nranks = ks%exchange%nranks
+      call build_list(ks, kinds, list(ks%exchange%rank + 1::nranks), bases, error)
+      if (allocated(error)) return
+      ks%exchange%built = ks%exchange%built + size(list(ks%exchange%rank + 1::nranks))
+      do i = 1, size(list)
+         owner = mod(i - 1, nranks)
+         if (owner == ks%exchange%rank) then
+            item = byte_writer_type()
+            if (bases) then
+               call encode_base(ks, kinds(list(i)), item)
+            else
+               call encode_shells(kinds(list(i)), item)
+            end if
+            b = item%bytes()
+            item = byte_writer_type()
+            call ks%exchange%broadcast(owner, b)
+         else
+            call ks%exchange%broadcast(owner, b)
+            r = byte_reader_type(b=b)
+            if (bases) then
+               call decode_base(ks, kinds(list(i)), r, ok)
+            else
+               call decode_shells(ks, kinds(list(i)), r, ok)
+            end if
+            if (.not. ok) then
+               write (msg, '(a,i0,a)') "kinds received from process ", owner, " are malformed"
+               call fatal_error(error, trim(msg))
+               return
+            end if
+            ks%exchange%received = ks%exchange%received + 1
+         end if
+         deallocate (b)
+      end do
+   end subroutine build_shared
 
    !> Build kinds(list) in parallel: their geometry and bare bodies (`bases`) or their shells.
    subroutine build_list(ks, kinds, list, bases, error)
@@ -369,14 +458,25 @@ contains
       type(particle_kind_type), intent(inout) :: kd
       logical, intent(out) :: hit
       type(byte_reader_type) :: r
-      type(contact_body_type) :: empty
-      real(wp) :: g(3)
       call ks%cache%load(base_key(ks, kd), r, hit)
       if (.not. hit) return
+      call decode_base(ks, kd, r, hit)
+      if (.not. hit) call reject(ks, hit)
+   end subroutine load_base
+
+   !> A kind's geometry and bare body from a payload (`encode_base`); `ok` false (and the body
+   !> empty) when the payload is malformed.
+   subroutine decode_base(ks, kd, r, ok)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(inout) :: kd
+      type(byte_reader_type), intent(inout) :: r
+      logical, intent(out) :: ok
+      type(contact_body_type) :: empty
+      real(wp) :: g(3)
       call r%get(g)
       call get_body(r, kd%body)
-      if (.not. r%done()) then
-         call reject(ks, hit)
+      ok = r%done()
+      if (.not. ok) then
          kd%body = empty
          return
       end if
@@ -387,17 +487,25 @@ contains
       kd%r_out = kd%body%r_max
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
-   end subroutine load_base
+   end subroutine decode_base
 
    !> Store a kind's geometry and bare body.
    subroutine store_base(ks, kd)
       type(kind_set_type), intent(inout) :: ks
       type(particle_kind_type), intent(in) :: kd
       type(byte_writer_type) :: w
-      call w%put([kd%width, kd%length, kd%volume])
-      call put_body(w, kd%body, bare_patches(ks%p))
+      call encode_base(ks, kd, w)
       call ks%cache%store(base_key(ks, kd), w%bytes())
    end subroutine store_base
+
+   !> The payload of a kind's geometry and bare body.
+   subroutine encode_base(ks, kd, w)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type), intent(inout) :: w
+      call w%put([kd%width, kd%length, kd%volume])
+      call put_body(w, kd%body, bare_patches(ks%p))
+   end subroutine encode_base
 
    !> A kind's shells from the cache (hit) or nothing; its base is in place.
    subroutine load_shells(ks, kd, hit)
@@ -405,16 +513,25 @@ contains
       type(particle_kind_type), intent(inout) :: kd
       logical, intent(out) :: hit
       type(byte_reader_type) :: r
+      call ks%cache%load(shells_key(ks, kd), r, hit)
+      if (.not. hit) return
+      call decode_shells(ks, kd, r, hit)
+      if (.not. hit) call reject(ks, hit)
+   end subroutine load_shells
+
+   !> A kind's shells from a payload (`encode_shells`); its base is in place. `ok` false (and no
+   !> shells) when the payload is malformed or holds another number of layers or shell mode.
+   subroutine decode_shells(ks, kd, r, ok)
+      type(kind_set_type), intent(in) :: ks
+      type(particle_kind_type), intent(inout) :: kd
+      type(byte_reader_type), intent(inout) :: r
+      logical, intent(out) :: ok
       type(sh_expansion_type), allocatable :: layers(:)
       real(wp), allocatable :: vol(:)
       integer :: n, k, has_body
-      call ks%cache%load(shells_key(ks, kd), r, hit)
-      if (.not. hit) return
+      ok = .false.
       call r%get(n)
-      if (n /= ks%p%nlayer) then
-         call reject(ks, hit)
-         return
-      end if
+      if (n /= ks%p%nlayer) return
       allocate (layers(n), vol(n))
       do k = 1, n
          call get_expansion(r, layers(k))
@@ -426,23 +543,31 @@ contains
          call get_body(r, kd%shell_body)
       end if
       if (.not. r%done() .or. has_body /= merge(1, 0, ks%p%mode /= shell_mode%overlap)) then
-         call reject(ks, hit)
          if (allocated(kd%shell_body)) deallocate (kd%shell_body)
          return
       end if
+      ok = .true.
       call move_alloc(layers, kd%layers)
       call move_alloc(vol, kd%layer_volume)
       if (allocated(kd%shell_body)) then
          kd%shell_body%shape = sh_truncate(kd%layers(n), kd%layers(n)%nmax)
          call shell_radii(ks%p, kd)
       end if
-   end subroutine load_shells
+   end subroutine decode_shells
 
    !> Store a kind's shells.
    subroutine store_shells(ks, kd)
       type(kind_set_type), intent(inout) :: ks
       type(particle_kind_type), intent(in) :: kd
       type(byte_writer_type) :: w
+      call encode_shells(kd, w)
+      call ks%cache%store(shells_key(ks, kd), w%bytes())
+   end subroutine store_shells
+
+   !> The payload of a kind's shells.
+   subroutine encode_shells(kd, w)
+      type(particle_kind_type), intent(in) :: kd
+      type(byte_writer_type), intent(inout) :: w
       integer :: k
       call w%put(size(kd%layers))
       do k = 1, size(kd%layers)
@@ -451,8 +576,7 @@ contains
       call w%put(kd%layer_volume)
       call w%put(merge(1, 0, allocated(kd%shell_body)))
       if (allocated(kd%shell_body)) call put_body(w, kd%shell_body, .true.)
-      call ks%cache%store(shells_key(ks, kd), w%bytes())
-   end subroutine store_shells
+   end subroutine encode_shells
 
    !> A cache entry that held the right key but a malformed payload: counted as rejected.
    subroutine reject(ks, hit)

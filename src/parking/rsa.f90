@@ -197,6 +197,7 @@ contains
          call progress_line(rp, st, run)
       end do
       st%res%reached = st%res%reached .or. st%res%vol >= st%target
+      if (allocated(rp%dist) .and. pk%p%nslab > 1) call rp%dist%note_slab(ap%sieve, count(pk%record(:pk%np) > 0), pk%np)
       call sieve_report(rp, st, run, vg, r_in)
    end subroutine park_sieve
 

@@ -34,6 +34,7 @@ module anm_parking_scheduler
    use anm_parking_attempts, only: attempt_type, attempt_params_type
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_void_grid, only: void_grid_type
+   use anm_parking_kinds, only: kind_exchange_type
    implicit none
    private
 
@@ -86,6 +87,11 @@ module anm_parking_scheduler
       procedure(agreed_value), deferred :: agree
       !> The smallest of each value over the processes, in place (collective; spatial mode).
       procedure(agreed_first), deferred :: agree_first
+      !> At the end of a sieve: the particles in this process' cell list and in the packing
+      !> (spatial mode; this default records nothing).
+      procedure :: note_slab
+      !> The processes' sharing of the kinds' building (this default: none, each builds all).
+      procedure :: kinds_exchange
    end type phase1_distributor_type
 
    abstract interface
@@ -126,6 +132,24 @@ module anm_parking_scheduler
    end interface
 
 contains
+
+   !> Default of `kinds_exchange`: none (every process builds every kind it needs).
+   subroutine kinds_exchange(self, kx)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> Exchange (left unallocated).
+      class(kind_exchange_type), allocatable, intent(out) :: kx
+   end subroutine kinds_exchange
+
+   !> Default of `note_slab`: nothing is recorded.
+   subroutine note_slab(self, sieve, nlocal, np)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> Sieve that ended.
+      integer, intent(in) :: sieve
+      !> Particles in this process' cell list, and in the packing.
+      integer, intent(in) :: nlocal, np
+   end subroutine note_slab
 
    !> Phase 1: particles nstream + 1 .. nstream + n of the sieve each find their first attempt that
    !> fits the packing as it is (in parallel; each particle draws only from its own stream).
