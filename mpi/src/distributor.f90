@@ -53,6 +53,8 @@ module anm_mpi_distributor
       integer :: attempt_bytes = 0
       !> Spatial mode: the first-fit reductions (windows) and their bytes, per run.
       integer(int64) :: windows = 0, window_bytes = 0
+      !> The mode the batches ran in (the dense strategy runs replicated whatever was asked).
+      logical :: slabs = .false.
       !> Spatial mode, per sieve (at its end): particles in this process' cell list and in the
       !> packing (0: not recorded).
       integer :: slab_local(64) = 0, slab_total(64) = 0
@@ -136,6 +138,7 @@ contains
       bytes = storage_size(at(1)) / 8
       if (associated(self%stats)) then
          call record_batch(self%stats, ap%sieve, n, merge(0, bytes, self%spatial), self%nranks)
+         self%stats%slabs = self%spatial
          call cpu_time(c0)
          w0 = MPI_Wtime()
       end if
@@ -304,7 +307,7 @@ contains
             nm = pack(st%members(:st%nbatch), st%sieve(:st%nbatch) == s)
             per = 0
             if (dist%nranks > 1) per = st%attempt_bytes
-            if (dist%spatial) then
+            if (st%slabs) then
                write (unit, fmt_window) s, nb, sum(int(nm, int64)), sum(b), minval(b), median_i8(b), maxval(b)
             else
                write (unit, fmt_sieve) s, nb, sum(int(nm, int64)), sum(b), minval(nm) * per, median(nm) * per, &
@@ -312,7 +315,7 @@ contains
             end if
             total = total + sum(b)
          end do
-         if (dist%spatial) then
+         if (st%slabs) then
             write (unit, '("mpi: in all ",i0," batches (slabs), ",i0," first-fit reductions (MPI_Allreduce MIN, ",' // &
                    '"8 bytes per member searched), ",i0," bytes reduced by each rank; ",i0," MPI_Allreduce of 8 ",' // &
                    '"bytes (the batch clock, the run attributes); ",i0," ranks x ",i0," threads")') st%nbatch, &
