@@ -36,7 +36,8 @@ contains
               new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds), &
               new_unittest("reserve and growth keep the particles and the answers", test_reserve), &
               new_unittest("slabs: a slab's local packing answers as the whole one, periodic", test_slabs_periodic), &
-              new_unittest("slabs: a slab's local packing answers as the whole one, walls", test_slabs_walls)]
+              new_unittest("slabs: a slab's local packing answers as the whole one, walls", test_slabs_walls), &
+              new_unittest("slabs: uneven slabs moved while parking answer as the whole packing", test_slabs_moved)]
    end subroutine collect_packing
 
    !> A packing of unit-sphere kinds (kind 1) with periodic or walled box (slab `slab` of `nslab`).
@@ -205,13 +206,16 @@ contains
    !> list); then every candidate centred in the slab with a bounding radius within the reach fits
    !> exactly when it overlaps none of all the particles (brute force over the whole packing),
    !> while the slab's cell list holds fewer particles than the packing.
-   subroutine slabs_case(error, periodic)
+   subroutine slabs_case(error, periodic, moved)
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in) :: periodic
+      !> Uneven slab bounds, set after the third batch (`set_slab`, which rebuilds the cell list).
+      logical, intent(in), optional :: moved
       type(packing_type) :: pk
       type(rng_type) :: rng
       type(fit_scratch_type) :: scratch
-      real(wp) :: x(3), r, lx
+      real(wp) :: x(3), r, lx, lo, hi
+      real(wp), parameter :: uneven(0:3) = [0.0_wp, 2.5_wp, 8.0_wp, 12.0_wp]
       integer :: slab, batch, i, k, ans, nfit, nover, first, nlocal, noutside
       lx = 12.0_wp
       do slab = 0, 2
@@ -222,6 +226,9 @@ contains
          do batch = 1, 8
             ! the reach grows once: the cell list is rebuilt with the wider halo
             if (batch == 5) call pk%set_reach(0.6_wp)
+            if (present(moved) .and. batch == 4) then
+               if (moved) call pk%set_slab(uneven(slab), uneven(slab + 1))
+            end if
             first = pk%np + 1
             do i = 1, 25
                call pk%add(1, [rng%uniform() * lx, rng%uniform() * 6.0_wp, rng%uniform() * 6.0_wp], &
@@ -235,17 +242,18 @@ contains
          nfit = 0
          nover = 0
          noutside = 0
+         call pk%slab_bounds(lo, hi)
          do k = 1, 2000
             ! centres near the slab's faces, where the halo matters
-            x = [(slab + merge(0.0_wp, 1.0_wp, k <= 1000)) * lx / 3 + merge(1.0_wp, -1.0_wp, k <= 1000) * 0.7_wp &
-                 * rng%uniform(), rng%uniform() * 6.0_wp, rng%uniform() * 6.0_wp]
+            x = [merge(lo, hi, k <= 1000) + merge(1.0_wp, -1.0_wp, k <= 1000) * 0.7_wp * rng%uniform(), &
+                 rng%uniform() * 6.0_wp, rng%uniform() * 6.0_wp]
             if (.not. pk%owns(x)) cycle
             r = 0.6_wp * rng%uniform()
             ans = brute_fit(pk, x, r, .not. periodic)
             if (ans < 0) cycle
             if (ans == 1) nfit = nfit + 1
             if (ans == 0) nover = nover + 1
-            if (ans == 0 .and. only_outside(pk, x, r, slab * lx / 3, (slab + 1) * lx / 3)) noutside = noutside + 1
+            if (ans == 0 .and. only_outside(pk, x, r, lo, hi)) noutside = noutside + 1
             call check(error, pk%fits(1, x, random_rotation(rng), r, scratch) .eqv. (ans == 1), &
                        "a slab's fits disagrees with the whole packing")
             if (allocated(error)) return
@@ -281,6 +289,13 @@ contains
       type(error_type), allocatable, intent(out) :: error
       call slabs_case(error, .false.)
    end subroutine test_slabs_walls
+
+   subroutine test_slabs_moved(error)
+      type(error_type), allocatable, intent(out) :: error
+      call slabs_case(error, .true., moved=.true.)
+      if (allocated(error)) return
+      call slabs_case(error, .false., moved=.true.)
+   end subroutine test_slabs_moved
 
    subroutine test_fits_periodic(error)
       type(error_type), allocatable, intent(out) :: error

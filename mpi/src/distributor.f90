@@ -31,7 +31,7 @@ module anm_mpi_distributor
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1, spatial_search
    use anm_parking_kinds, only: kind_exchange_type
    use anm_mpi_kinds, only: mpi_kinds_type, new_mpi_kinds
-   use mpi_f08, only: MPI_Comm, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
+   use mpi_f08, only: MPI_Comm, MPI_Allgather, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE
    implicit none
@@ -63,6 +63,25 @@ module anm_mpi_distributor
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
    end type comm_stats_type
 
+   !> The load balance of the slabs: this process' busy time (its share of the spatial searches,
+   !> outside the reductions) since the last balance, and when the slabs last moved.
+   type :: balance_state_type
+      !> Busy seconds since the last balance; the clock at the end of the last reduction.
+      real(wp) :: busy = 0.0_wp, mark = 0.0_wp
+      !> Batches since the last balance; times the slabs moved; wall seconds of the last move
+      !> (its cell-list rebuild), and busy seconds since then.
+      integer :: batches = 0, moves = 0
+      real(wp) :: move_cost = 0.0_wp, since_move = 0.0_wp
+      !> Imbalance (largest over mean busy time) at the first and the last check.
+      real(wp) :: first_ratio = 0.0_wp, last_ratio = 0.0_wp
+      !> Slab bounds after the last move (mm), process 0 .. n - 1's lower ones and the box edge.
+      real(wp), allocatable :: bounds(:)
+      !> Batches between checks; a move at every check whatever the times (the tests set this
+      !> with ANM_MPI_BALANCE_EVERY=N: a check every N batches, always a move).
+      integer :: every = 32
+      logical :: always = .false.
+   end type balance_state_type
+
    !> Phase 1 over the processes of a communicator.
    type, extends(phase1_distributor_type) :: mpi_distributor_type
       !> Communicator, this process' rank and the number of processes.
@@ -71,12 +90,15 @@ module anm_mpi_distributor
       !> Counters (allocated when counting; a pointer, so that the collective calls, which take
       !> the distributor as intent(in), can count).
       type(comm_stats_type), pointer :: stats => null()
+      !> Load balance of the slabs (a pointer for the same reason).
+      type(balance_state_type), pointer :: bal => null()
    contains
       procedure :: phase1
       procedure :: agree
       procedure :: agree_first
       procedure :: note_slab
       procedure :: kinds_exchange
+      procedure :: balance
    end type mpi_distributor_type
 
 contains
@@ -94,6 +116,8 @@ contains
       logical, intent(in), optional :: count
       !> Replicated data instead of slabs (default: slabs, the spatial decomposition).
       logical, intent(in), optional :: replicated
+      character(len=32) :: env
+      integer :: stat, every
       dist%comm = comm
       if (present(count)) then
          if (count) then
@@ -109,6 +133,15 @@ contains
       if (present(replicated)) dist%spatial = dist%spatial .and. .not. replicated
       dist%nslab = dist%nranks
       dist%slab = dist%rank
+      allocate (dist%bal)
+      call get_environment_variable("ANM_MPI_BALANCE_EVERY", env, status=stat)
+      if (stat == 0) then
+         read (env, *, iostat=stat) every
+         if (stat == 0 .and. every >= 1) then
+            dist%bal%every = every
+            dist%bal%always = .true.
+         end if
+      end if
    end subroutine new_mpi_distributor
 
    !> Phase 1 of a batch: this process' members (rank + 1, rank + 1 + nranks, ...), then every
@@ -143,6 +176,8 @@ contains
          w0 = MPI_Wtime()
       end if
       if (self%spatial) then
+         ! busy time starts now (the phase 2 of the last batch was the same on every process)
+         self%bal%mark = MPI_Wtime()
          do b = 1, n
             call at(b)%start(ap, nstream + b)
          end do
@@ -208,8 +243,10 @@ contains
       integer(int64), intent(inout) :: k(:)
       real(wp) :: w0
       if (self%nranks == 1) return
-      if (associated(self%stats)) w0 = MPI_Wtime()
+      w0 = MPI_Wtime()
+      self%bal%busy = self%bal%busy + (w0 - self%bal%mark)
       call MPI_Allreduce(MPI_IN_PLACE, k, size(k), MPI_INTEGER8, MPI_MIN, self%comm)
+      self%bal%mark = MPI_Wtime()
       if (associated(self%stats)) then
          self%stats%gather_wall = self%stats%gather_wall + (MPI_Wtime() - w0)
          self%stats%windows = self%stats%windows + 1
@@ -218,6 +255,63 @@ contains
                                                                            + 8_int64 * size(k)
       end if
    end subroutine agree_first
+
+   !> Every 32 batches (collective): when the processes' busy times differ by more
+   !> than 10 % (largest over mean), the slab bounds move to where the work, taken as uniform
+   !> along x within each slab, splits evenly (70 % of the way, against oscillation), and each
+   !> process rebuilds its cell list (`packing_type%set_slab`). A move waits until the busy time
+   !> since the last one is 20 times what that move's rebuild took. The bounds are computed alike
+   !> on every process from the gathered times; the model does not depend on them.
+   subroutine balance(self, pk)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+      real(wp) :: t(0:self%nranks - 1), b(0:self%nranks), nb(0:self%nranks), cum(0:self%nranks)
+      real(wp) :: lo, hi, total, target, w0, ratio
+      integer :: r, i, n
+      if (.not. self%spatial .or. self%nranks == 1) return
+      associate (bl => self%bal)
+         bl%batches = bl%batches + 1
+         if (bl%batches < bl%every) return
+         n = self%nranks
+         call MPI_Allgather(bl%busy, 1, MPI_DOUBLE_PRECISION, t, 1, MPI_DOUBLE_PRECISION, self%comm)
+         bl%batches = 0
+         bl%busy = 0.0_wp
+         total = sum(t)
+         bl%since_move = bl%since_move + total / n
+         ratio = maxval(t) / max(1.0e-12_wp, total / n)
+         if (bl%first_ratio == 0.0_wp) bl%first_ratio = ratio
+         bl%last_ratio = ratio
+         if (.not. bl%always .and. (ratio < 1.1_wp .or. bl%since_move < 20.0_wp * bl%move_cost)) return
+         call pk%slab_bounds(lo, hi)
+         call MPI_Allgather(lo, 1, MPI_DOUBLE_PRECISION, b, 1, MPI_DOUBLE_PRECISION, self%comm)
+         b(0) = 0.0_wp
+         b(n) = pk%p%box(1)
+         t = max(t, 1.0e-9_wp * total)
+         cum(0) = 0.0_wp
+         do r = 0, n - 1
+            cum(r + 1) = cum(r) + t(r)
+         end do
+         nb = b
+         i = 0
+         do r = 1, n - 1
+            target = cum(n) * r / n
+            do while (i < n - 1 .and. cum(i + 1) < target)
+               i = i + 1
+            end do
+            nb(r) = b(i) + (target - cum(i)) / t(i) * (b(i + 1) - b(i))
+            nb(r) = b(r) + 0.7_wp * (nb(r) - b(r))
+         end do
+         w0 = MPI_Wtime()
+         call pk%set_slab(nb(self%rank), nb(self%rank + 1))
+         bl%move_cost = MPI_Wtime() - w0
+         call MPI_Allreduce(MPI_IN_PLACE, bl%move_cost, 1, MPI_DOUBLE_PRECISION, MPI_MAX, self%comm)
+         bl%since_move = 0.0_wp
+         bl%moves = bl%moves + 1
+         bl%bounds = nb
+      end associate
+   end subroutine balance
 
    !> The kinds built in shares by the processes of the communicator (anm_mpi_kinds).
    subroutine kinds_exchange(self, kx)
@@ -333,6 +427,13 @@ contains
                slab_hi(s), st%slab_total(s), real(slab_lo(s)) / st%slab_total(s), real(slab_hi(s)) / st%slab_total(s), &
                1.0 / dist%nranks
          end do
+         if (dist%spatial .and. st%slabs) then
+            write (unit, '("mpi: load balance: busy time largest/mean ",f0.2," at the first check, ",f0.2,' // &
+                   '" at the last; the slabs moved ",i0," times")') dist%bal%first_ratio, dist%bal%last_ratio, &
+               dist%bal%moves
+            if (allocated(dist%bal%bounds)) write (unit, '("mpi: slab bounds along x (mm) after the last move:",' // &
+                                                   '*(1x,f0.3))') dist%bal%bounds
+         end if
          call cpu_time(cpu)
          write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
                 '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu

@@ -81,8 +81,10 @@ module anm_parking_packing
       !> (`cell_list_type%reorder`; doubled each time).
       integer :: next_reorder = first_reorder
       type(cell_list_type) :: cl
-      !> Slabs: the largest bounding radius of a candidate to come (mm).
-      real(wp) :: reach = 0.0_wp
+      !> Slabs: the largest bounding radius of a candidate to come (mm), and this process' slab
+      !> [slab_lo, slab_hi) along x (mm; the first slab also owns x < slab_lo, the last x >=
+      !> slab_hi; unset (slab_hi <= slab_lo): equal slabs, `set_slab` moves them).
+      real(wp) :: reach = 0.0_wp, slab_lo = 0.0_wp, slab_hi = 0.0_wp
    contains
       !> Add a particle.
       procedure :: add
@@ -110,6 +112,10 @@ module anm_parking_packing
       procedure :: localize
       !> Set the reach (the cell list is rebuilt when it grows).
       procedure :: set_reach
+      !> Move this process' slab (the cell list is rebuilt).
+      procedure :: set_slab
+      !> This process' slab [lo, hi) along x.
+      procedure :: slab_bounds
    end type packing_type
 
    !> Initial capacity (particles).
@@ -322,21 +328,38 @@ contains
       end do
    end subroutine neighbours
 
-   !> Whether centre x lies in this process' slab: slab floor(x_1 nslab / L_1), clamped to the box
-   !> (always true with one slab).
+   !> This process' slab [lo, hi) along x (mm): set by `set_slab`, else slab r of nslab equal ones.
+   pure subroutine slab_bounds(self, lo, hi)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Bounds (mm).
+      real(wp), intent(out) :: lo, hi
+      if (self%slab_hi > self%slab_lo) then
+         lo = self%slab_lo
+         hi = self%slab_hi
+      else
+         lo = self%p%box(1) * self%p%slab / self%p%nslab
+         hi = self%p%box(1) * (self%p%slab + 1) / self%p%nslab
+      end if
+   end subroutine slab_bounds
+
+   !> Whether centre x lies in this process' slab [lo, hi) (the first slab also owns x < lo, the
+   !> last x >= hi; the processes' bounds must tile the box edge alike). Always true with one slab.
    pure logical function owns(self, x)
       !> Packing.
       class(packing_type), intent(in) :: self
       !> Centre (mm).
       real(wp), intent(in) :: x(3)
+      real(wp) :: lo, hi
       owns = .true.
       if (self%p%nslab <= 1) return
-      owns = min(self%p%nslab - 1, max(0, floor(x(1) / self%p%box(1) * self%p%nslab))) == self%p%slab
+      call self%slab_bounds(lo, hi)
+      owns = (x(1) >= lo .or. self%p%slab == 0) .and. (x(1) < hi .or. self%p%slab == self%p%nslab - 1)
    end function owns
 
    !> Whether particle i can meet a candidate centred in this process' slab: its centre lies within
    !> reach + its bounding radius of the slab along x (periodic: either way round; a relative
-   !> margin of 1e-9 covers the rounding of the slab bounds). Always true with one slab.
+   !> margin of 1e-9 covers rounding). Always true with one slab.
    pure logical function in_region(self, i)
       !> Packing.
       class(packing_type), intent(in) :: self
@@ -346,8 +369,10 @@ contains
       in_region = .true.
       if (self%p%nslab <= 1) return
       lx = self%p%box(1)
-      lo = lx * self%p%slab / self%p%nslab
-      hi = lx * (self%p%slab + 1) / self%p%nslab
+      call self%slab_bounds(lo, hi)
+      ! the end slabs own the centres beyond the box's faces too
+      if (self%p%slab == 0) lo = min(lo, 0.0_wp)
+      if (self%p%slab == self%p%nslab - 1) hi = max(hi, lx)
       x = self%center(1, i)
       if (x >= lo .and. x <= hi) return
       if (self%p%periodic) then
@@ -357,6 +382,19 @@ contains
       end if
       in_region = d <= (self%reach + self%rho(i)) * (1.0_wp + 1.0e-9_wp) + 1.0e-9_wp * lx
    end function in_region
+
+   !> Move this process' slab to [lo, hi) along x (mm) and rebuild the cell list from the
+   !> particles then in reach. Every process must move its slab in the same call, so that the
+   !> slabs keep tiling the box edge (the MPI build's load balance).
+   subroutine set_slab(self, lo, hi)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Bounds (mm), lo < hi.
+      real(wp), intent(in) :: lo, hi
+      self%slab_lo = lo
+      self%slab_hi = hi
+      if (self%p%nslab > 1) call self%compact()
+   end subroutine set_slab
 
    !> Take particles first..np that are out of reach of this process' slab out of the cell list
    !> (nothing with one slab).

@@ -179,6 +179,8 @@ contains
          call settle_batch(bt, pk, ap, rp, vg, st, run)
          ! slabs: the batch's particles out of this process' reach leave its cell list
          call pk%localize(bt%np_frozen + 1)
+         ! slabs: moved now and then so that the processes' work evens out (no effect on the model)
+         if (allocated(rp%dist) .and. pk%p%nslab > 1) call rp%dist%balance(pk)
          call reserve_ahead(pk, st)
          if (rp%void .and. mod(st%nstream, void_epoch) == 0 .and. pk%np > st%np_blocked) then
             call advance_void(vg, pk, st, changed)

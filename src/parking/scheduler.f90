@@ -92,6 +92,9 @@ module anm_parking_scheduler
       procedure :: note_slab
       !> The processes' sharing of the kinds' building (this default: none, each builds all).
       procedure :: kinds_exchange
+      !> Between batches (collective in spatial mode): move the slabs so that the processes'
+      !> work evens out (this default: never). The slabs never change the model.
+      procedure :: balance
    end type phase1_distributor_type
 
    abstract interface
@@ -132,6 +135,14 @@ module anm_parking_scheduler
    end interface
 
 contains
+
+   !> Default of `balance`: the slabs stay.
+   subroutine balance(self, pk)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+   end subroutine balance
 
    !> Default of `kinds_exchange`: none (every process builds every kind it needs).
    subroutine kinds_exchange(self, kx)
