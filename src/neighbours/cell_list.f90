@@ -177,6 +177,18 @@ contains
       end if
    end function cell_coord
 
+   !> The cell (1-based index into the level's heads) of a centre in an active level.
+   pure integer function cell_index(self, lv, center) result(cell)
+      type(cell_list_type), intent(in) :: self
+      type(cell_level_type), intent(in) :: lv
+      real(wp), intent(in) :: center(3)
+      integer :: c(3)
+      c(1) = cell_coord(center(1), lv%h(1), lv%n(1), self%periodic)
+      c(2) = cell_coord(center(2), lv%h(2), lv%n(2), self%periodic)
+      c(3) = cell_coord(center(3), lv%h(3), lv%n(3), self%periodic)
+      cell = 1 + c(1) + lv%n(1) * (c(2) + lv%n(2) * c(3))
+   end function cell_index
+
    !> Insert particle i (ids must be inserted once each; the storage grows as needed).
    pure subroutine insert(self, i, center, rho, rin)
       !> Cell list.
@@ -190,14 +202,11 @@ contains
       !> Radius within which another particle certainly overlaps this one (see `neighbours`;
       !> default 0: never certain).
       real(wp), intent(in), optional :: rin
-      integer :: k, c(3), cell, b, m, first
+      integer :: k, cell, b, m, first
       k = level_for(self, rho)
       call activate(self, k)
       associate (lv => self%levels(k))
-         c(1) = cell_coord(center(1), lv%h(1), lv%n(1), self%periodic)
-         c(2) = cell_coord(center(2), lv%h(2), lv%n(2), self%periodic)
-         c(3) = cell_coord(center(3), lv%h(3), lv%n(3), self%periodic)
-         cell = 1 + c(1) + lv%n(1) * (c(2) + lv%n(2) * c(3))
+         cell = cell_index(self, lv, center)
          first = lv%head(cell)
          b = first
          if (first == 0) then
@@ -233,14 +242,11 @@ contains
       integer, intent(in) :: i
       !> Centre and bounding radius given at insertion.
       real(wp), intent(in) :: center(3), rho
-      integer :: k, c(3), cell, b, m, first
+      integer :: k, cell, b, m, first
       k = level_for(self, rho)
       if (.not. allocated(self%levels(k)%head)) return
       associate (lv => self%levels(k))
-         c(1) = cell_coord(center(1), lv%h(1), lv%n(1), self%periodic)
-         c(2) = cell_coord(center(2), lv%h(2), lv%n(2), self%periodic)
-         c(3) = cell_coord(center(3), lv%h(3), lv%n(3), self%periodic)
-         cell = 1 + c(1) + lv%n(1) * (c(2) + lv%n(2) * c(3))
+         cell = cell_index(self, lv, center)
          first = lv%head(cell)
          b = first
          do while (b > 0)
