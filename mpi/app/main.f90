@@ -77,6 +77,12 @@ program anm_mpi
       select case (args(1)%s)
       case ("-h", "--help", "help")
          call write_usage(output_unit)
+         write (output_unit, '(a)') "", "MPI build (docs/mpi.md): mpirun -np N anm run FILE.nml [--force] [--comm-stats] " &
+            //"[--replicated]", &
+            "        --comm-stats: what was communicated, per sieve, and the peak memory per rank (stderr)", &
+            "        --replicated: every rank holds the whole packing (default: slabs along x, each rank", &
+            "        its slab and halo; the dense strategy always runs replicated); the model is the same", &
+            "  mpirun -np N anm verify MODEL.h5 [options]: each rank audits the pairs of its slab"
       case ("--version")
          write (output_unit, '(a)') "anm "//anm_version//" (MPI)"
       case ("shape")
