@@ -402,7 +402,7 @@ contains
             per = 0
             if (dist%nranks > 1) per = st%attempt_bytes
             if (st%slabs) then
-               write (unit, fmt_window) s, nb, sum(int(nm, int64)), sum(b), minval(b), median_i8(b), maxval(b)
+               write (unit, fmt_window) s, nb, sum(int(nm, int64)), sum(b), minval(b), 8 * median(int(b / 8)), maxval(b)
             else
                write (unit, fmt_sieve) s, nb, sum(int(nm, int64)), sum(b), minval(nm) * per, median(nm) * per, &
                   maxval(nm) * per
@@ -478,26 +478,6 @@ contains
          if (2 * seen >= size(v)) return
       end do
    end function median
-
-   !> The median of non-negative 8-byte values (sorting a copy; one value per batch).
-   pure integer(int64) function median_i8(v) result(m)
-      integer(int64), intent(in) :: v(:)
-      integer(int64), allocatable :: c(:)
-      integer(int64) :: t
-      integer :: i, j
-      c = v
-      do i = 2, size(c)
-         t = c(i)
-         j = i - 1
-         do while (j >= 1)
-            if (c(j) <= t) exit
-            c(j + 1) = c(j)
-            j = j - 1
-         end do
-         c(j + 1) = t
-      end do
-      m = c((size(c) + 1) / 2)
-   end function median_i8
 
    !> Members of a batch of n on rank r of nranks (round robin).
    pure integer function members(n, r, nranks) result(m)

@@ -84,11 +84,9 @@ contains
             pp%nslab = rp%dist%nslab
             pp%slab = rp%dist%slab
          end if
-      end if
-      ! the MPI build: the processes build the kinds in shares and exchange them; the on-disk
-      ! cache is then not used (its hits could differ between the processes, which must build
-      ! the same lists together)
-      if (present(dist)) then
+         ! the processes build the kinds in shares and exchange them; the on-disk cache is then
+         ! not used (its hits could differ between the processes, which must build the same lists
+         ! together)
          call dist%kinds_exchange(ks%exchange)
          if (allocated(ks%exchange)) then
             if (ks%exchange%nranks > 1) ks%cache%on = .false.

@@ -67,8 +67,6 @@ module anm_parking_kind_cache
       generic :: put => put_int, put_long, put_ints, put_real, put_reals, put_reals2, put_singles, put_text
       !> The bytes written.
       procedure :: bytes
-      !> Append raw bytes.
-      procedure :: put_bytes
    end type byte_writer_type
 
    !> Reading a payload back; `bad` is set (and zeros returned) on reading past its end.
@@ -425,15 +423,6 @@ contains
       w%b(w%n + 1:w%n + size(x)) = x
       w%n = w%n + size(x)
    end subroutine put_raw
-
-   !> Append raw bytes (another payload, say).
-   subroutine put_bytes(w, x)
-      !> Buffer.
-      class(byte_writer_type), intent(inout) :: w
-      !> Bytes.
-      integer(int8), intent(in) :: x(:)
-      call put_raw(w, x)
-   end subroutine put_bytes
 
    subroutine put_int(w, x)
       class(byte_writer_type), intent(inout) :: w

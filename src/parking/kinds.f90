@@ -325,17 +325,14 @@ contains
       integer, intent(in) :: list(:)
       logical, intent(in) :: bases
       type(error_type), allocatable, intent(out) :: error
-      type(byte_writer_type) :: item
       type(byte_reader_type) :: r
       integer(int8), allocatable :: b(:)
       integer :: i, owner, nranks
-      logical :: ok
+      logical :: ok, shared
       character(len=80) :: msg
-      if (.not. allocated(ks%exchange)) then
-         call build_list(ks, kinds, list, bases, error)
-         return
-      end if
-      if (ks%exchange%nranks <= 1 .or. size(list) == 0) then
+      shared = allocated(ks%exchange)
+      if (shared) shared = ks%exchange%nranks > 1 .and. size(list) > 0
+      if (.not. shared) then
          call build_list(ks, kinds, list, bases, error)
          return
       end if
@@ -346,14 +343,15 @@ contains
       do i = 1, size(list)
          owner = mod(i - 1, nranks)
          if (owner == ks%exchange%rank) then
-            item = byte_writer_type()
-            if (bases) then
-               call encode_base(ks, kinds(list(i)), item)
-            else
-               call encode_shells(kinds(list(i)), item)
-            end if
-            b = item%bytes()
-            item = byte_writer_type()
+            block
+               type(byte_writer_type) :: item
+               if (bases) then
+                  call encode_base(ks, kinds(list(i)), item)
+               else
+                  call encode_shells(kinds(list(i)), item)
+               end if
+               b = item%bytes()
+            end block
             call ks%exchange%broadcast(owner, b)
          else
             call ks%exchange%broadcast(owner, b)

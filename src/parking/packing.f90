@@ -83,7 +83,7 @@ module anm_parking_packing
       type(cell_list_type) :: cl
       !> Slabs: the largest bounding radius of a candidate to come (mm), and this process' slab
       !> [slab_lo, slab_hi) along x (mm; the first slab also owns x < slab_lo, the last x >=
-      !> slab_hi; unset (slab_hi <= slab_lo): equal slabs, `set_slab` moves them).
+      !> slab_hi; equal slabs from `new_packing`, `set_slab` moves them).
       real(wp) :: reach = 0.0_wp, slab_lo = 0.0_wp, slab_hi = 0.0_wp
    contains
       !> Add a particle.
@@ -143,6 +143,8 @@ contains
       call new_cell_list(pk%cl, params%box, params%periodic, params%rho_min, capacity=n)
       allocate (pk%center(3, n), pk%rot(3, 3, n), pk%scale(n), pk%rho(n), pk%sieve(n), pk%kind_of(n))
       allocate (pk%record(n), pk%owner(n))
+      pk%slab_lo = params%box(1) * params%slab / max(1, params%nslab)
+      pk%slab_hi = params%box(1) * (params%slab + 1) / max(1, params%nslab)
    end subroutine new_packing
 
    !> Add a particle of kind kn at centre x (inside the box), rotation rr, scale sc; its id is np.
@@ -328,19 +330,14 @@ contains
       end do
    end subroutine neighbours
 
-   !> This process' slab [lo, hi) along x (mm): set by `set_slab`, else slab r of nslab equal ones.
+   !> This process' slab [lo, hi) along x (mm).
    pure subroutine slab_bounds(self, lo, hi)
       !> Packing.
       class(packing_type), intent(in) :: self
       !> Bounds (mm).
       real(wp), intent(out) :: lo, hi
-      if (self%slab_hi > self%slab_lo) then
-         lo = self%slab_lo
-         hi = self%slab_hi
-      else
-         lo = self%p%box(1) * self%p%slab / self%p%nslab
-         hi = self%p%box(1) * (self%p%slab + 1) / self%p%nslab
-      end if
+      lo = self%slab_lo
+      hi = self%slab_hi
    end subroutine slab_bounds
 
    !> Whether centre x lies in this process' slab [lo, hi) (the first slab also owns x < lo, the
@@ -350,11 +347,10 @@ contains
       class(packing_type), intent(in) :: self
       !> Centre (mm).
       real(wp), intent(in) :: x(3)
-      real(wp) :: lo, hi
       owns = .true.
       if (self%p%nslab <= 1) return
-      call self%slab_bounds(lo, hi)
-      owns = (x(1) >= lo .or. self%p%slab == 0) .and. (x(1) < hi .or. self%p%slab == self%p%nslab - 1)
+      owns = (x(1) >= self%slab_lo .or. self%p%slab == 0) .and. &
+             (x(1) < self%slab_hi .or. self%p%slab == self%p%nslab - 1)
    end function owns
 
    !> Whether particle i can meet a candidate centred in this process' slab: its centre lies within
@@ -369,7 +365,8 @@ contains
       in_region = .true.
       if (self%p%nslab <= 1) return
       lx = self%p%box(1)
-      call self%slab_bounds(lo, hi)
+      lo = self%slab_lo
+      hi = self%slab_hi
       ! the end slabs own the centres beyond the box's faces too
       if (self%p%slab == 0) lo = min(lo, 0.0_wp)
       if (self%p%slab == self%p%nslab - 1) hi = max(hi, lx)

@@ -243,11 +243,7 @@ contains
             if (changed .or. st%done) exit
          end if
          st%nstream = st%nstream + 1
-         if (allocated(rp%dist)) then
-            call bt%settle(b, ap, pk, vg, scratch, rp%dist, window(st))
-         else
-            call bt%settle(b, ap, pk, vg, scratch)
-         end if
+         call bt%settle(b, ap, pk, vg, scratch, rp%dist, window(st))
          associate (a => bt%at(b))
             run%attempts = run%attempts + a%count - merge(1, 0, a%done)
             st%attempts = st%attempts + a%count - merge(1, 0, a%done)
