@@ -31,7 +31,9 @@
 !> 10^6 sand grains the query was a third of the run, mostly these misses. `reorder` lays the
 !> blocks out again in cell order (level by level, cells in index order, each chain in its order):
 !> a query's cells along x then lie side by side in memory. It changes no answer, nor the order of
-!> the candidates.
+!> the candidates. `neighbours` also reads the heads of up to 32 cells, then touches their first
+!> blocks, before it tests any record: these loads do not wait for each other, so their cache
+!> misses overlap (the million-grain job: 26 -> 19 s on 2 threads, same candidates in the same order).
 !>
 !> Usage:
 !>     call new_cell_list(cl, box, periodic, rho_min)
@@ -443,7 +445,9 @@ contains
       !> Only ids up to jmax count.
       integer, intent(in), optional :: jmax
       integer :: k, lo(3), hi(3), own(3), side(3), na(3), nb(3), t1, t2, t3, i1, i2, i3, c1, c2, c3
-      integer :: cell, s1, s2, s3, d3, b, m, j0, j1
+      integer, parameter :: batch = 32
+      integer :: s1, s2, s3, d3, b, m, j0, j1, nc, q, tot
+      integer :: cells(batch), heads(batch), ims(3, batch)
       real(wp) :: reach, d(3), e(3), sh(3), csh(3), lim, half(3), qin, rr, r2
       logical :: level_images, full(3), anyfull, use_in
       ncand = 0
@@ -470,65 +474,90 @@ contains
                na(d3) = merge(hi(d3) - own(d3), own(d3) - lo(d3), side(d3) > 0)
                nb(d3) = hi(d3) - lo(d3) - na(d3)
             end do
+            ! the cells are visited in batches of up to `batch` cells: first every head of the
+            ! batch is read, then the first block of every occupied cell is touched, then the
+            ! records are tested. The loads of one step do not depend on each other, so the
+            ! processor overlaps their cache misses instead of waiting for one cell at a time
+            ! (the query is bound by memory latency at 10^6-10^7 particles). Same candidates in
+            ! the same order as visiting cell by cell.
+            nc = 0
             do t3 = 0, hi(3) - lo(3)
                i3 = zigzag(t3, own(3), side(3), na(3), nb(3))
                c3 = wrap_index(i3, lv%n(3))
-               csh(3) = real((i3 - c3) / lv%n(3), wp) * self%box(3)
                do t2 = 0, hi(2) - lo(2)
                   i2 = zigzag(t2, own(2), side(2), na(2), nb(2))
                   c2 = wrap_index(i2, lv%n(2))
-                  csh(2) = real((i2 - c2) / lv%n(2), wp) * self%box(2)
                   do t1 = 0, hi(1) - lo(1)
                      i1 = zigzag(t1, own(1), side(1), na(1), nb(1))
                      c1 = wrap_index(i1, lv%n(1))
-                     csh(1) = real((i1 - c1) / lv%n(1), wp) * self%box(1)
-                     cell = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
-                     b = lv%head(cell)
-                     do while (b > 0)
-                        associate (bk => self%blocks(b))
-                           do m = 1, bk%n
-                              if (bk%r(m)%id <= j0 .or. bk%r(m)%id > j1) cycle
-                              lim = rho + real(bk%r(m)%rho, wp)
-                              rr = qin + real(bk%r(m)%rin, wp)
-                              if (level_images) then
-                                 d = bk%r(m)%x - center
-                                 do s3 = -1, 1
-                                    do s2 = -1, 1
-                                       do s1 = -1, 1
-                                          sh = [s1, s2, s3] * self%box
-                                          r2 = sum((d + sh)**2)
-                                          if (r2 >= lim * lim) cycle
-                                          if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
-                                             hit = .true.
-                                             return
-                                          end if
-                                          call push(cand, shift, ncand, bk%r(m)%id, sh)
+                     nc = nc + 1
+                     cells(nc) = 1 + c1 + lv%n(1) * (c2 + lv%n(2) * c3)
+                     ims(1, nc) = (i1 - c1) / lv%n(1)
+                     ims(2, nc) = (i2 - c2) / lv%n(2)
+                     ims(3, nc) = (i3 - c3) / lv%n(3)
+                     if (nc == batch .or. (t1 == hi(1) - lo(1) .and. t2 == hi(2) - lo(2) &
+                         .and. t3 == hi(3) - lo(3))) then
+                        do q = 1, nc
+                           heads(q) = lv%head(cells(q))
+                        end do
+                        tot = 0
+                        do q = 1, nc
+                           if (heads(q) > 0) tot = tot + self%blocks(heads(q))%n
+                        end do
+                        if (tot < 0) return ! never: it keeps the touching loads
+                        do q = 1, nc
+                           csh = real(ims(:, q), wp) * self%box
+                           b = heads(q)
+                           do while (b > 0)
+                              associate (bk => self%blocks(b))
+                                 do m = 1, bk%n
+                                    if (bk%r(m)%id <= j0 .or. bk%r(m)%id > j1) cycle
+                                    lim = rho + real(bk%r(m)%rho, wp)
+                                    rr = qin + real(bk%r(m)%rin, wp)
+                                    if (level_images) then
+                                       d = bk%r(m)%x - center
+                                       do s3 = -1, 1
+                                          do s2 = -1, 1
+                                             do s1 = -1, 1
+                                                sh = [s1, s2, s3] * self%box
+                                                r2 = sum((d + sh)**2)
+                                                if (r2 >= lim * lim) cycle
+                                                if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
+                                                   hit = .true.
+                                                   return
+                                                end if
+                                                call push(cand, shift, ncand, bk%r(m)%id, sh)
+                                             end do
+                                          end do
                                        end do
-                                    end do
+                                       cycle
+                                    end if
+                                    ! the cell's image gives the shift, except along edges
+                                    ! whose whole range of cells is visited (there: the
+                                    ! nearest image)
+                                    sh = csh
+                                    e = bk%r(m)%x - center
+                                    if (anyfull) then
+                                       do d3 = 1, 3
+                                          if (full(d3)) sh(d3) = nearest_shift(e(d3), half(d3), &
+                                                                               self%box(d3))
+                                       end do
+                                    end if
+                                    d = e + sh
+                                    r2 = d(1) * d(1) + d(2) * d(2) + d(3) * d(3)
+                                    if (r2 >= lim * lim) cycle
+                                    if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
+                                       hit = .true.
+                                       return
+                                    end if
+                                    call push(cand, shift, ncand, bk%r(m)%id, sh)
                                  end do
-                                 cycle
-                              end if
-                              ! the cell's image gives the shift, except along edges whose whole
-                              ! range of cells is visited (there: the nearest image)
-                              sh = csh
-                              e = bk%r(m)%x - center
-                              if (anyfull) then
-                                 do d3 = 1, 3
-                                    if (full(d3)) sh(d3) = nearest_shift(e(d3), half(d3), self%box(d3))
-                                 end do
-                              end if
-                              d = e + sh
-                              r2 = d(1) * d(1) + d(2) * d(2) + d(3) * d(3)
-                              if (r2 >= lim * lim) cycle
-                              if (use_in .and. r2 < rr * rr .and. rr > 0.0_wp) then
-                                 hit = .true.
-                                 return
-                              end if
-                              call push(cand, shift, ncand, bk%r(m)%id, sh)
+                                 b = bk%next
+                              end associate
                            end do
-                           b = bk%next
-                        end associate
-                     end do
+                        end do
+                        nc = 0
+                     end if
                   end do
                end do
             end do
