@@ -119,7 +119,8 @@ contains
              .and. all(a%rhi == b%rhi) .and. all(a%ball == b%ball) .and. all(a%brad == b%brad) &
              .and. all(a%dlo == b%dlo) .and. all(a%dhi == b%dhi) .and. all(a%row_ct == b%row_ct) &
              .and. all(a%row_st == b%row_st) .and. all(a%row_cosa == b%row_cosa) .and. all(a%row_sina == b%row_sina) &
-             .and. all(a%col_cp == b%col_cp) .and. all(a%col_sp == b%col_sp) .and. all(a%node == b%node)
+             .and. all(a%col_cp == b%col_cp) .and. all(a%col_sp == b%col_sp) .and. all(a%node == b%node) &
+             .and. all(a%supp == b%supp)
    end function same_body
 
    subroutine test_reuse(error)
@@ -225,7 +226,7 @@ contains
       ! a new component of contact_body_type must be written by put_body/get_body
       ! (src/parking/kind_cache.f90) and compared in same_body above; then update this size and
       ! bump cache_format_version
-      call check(error, storage_size(body), 14336, "storage_size(contact_body_type) (bits)")
+      call check(error, storage_size(body), 15040, "storage_size(contact_body_type) (bits)")
    end subroutine test_layout
 
    subroutine read_bytes(path, bytes)

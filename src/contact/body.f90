@@ -35,7 +35,7 @@ module anm_contact_body
    private
 
    public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, support_bound, support_cell
    public :: node_size, nd_dir, nd_cosa, nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
@@ -46,6 +46,9 @@ module anm_contact_body
    integer, parameter :: cells_per_leaf = 8
    !> Thesis default N_ext.
    integer, parameter :: default_next = 40
+   !> Cells per face edge of the cube map of directions of the support table (6 x 32^2 cells of
+   !> about 0.05 rad).
+   integer, parameter :: support_n = 32
 
    !> Layout of a column of `contact_body_type%node` (one patch of levels 0..leaf_level): cap
    !> centre direction (3), cos and sin of the cap half-angle; oriented box of the surface piece:
@@ -105,6 +108,12 @@ module anm_contact_body
       !> of the surface piece {r(u) u : u in patch}: every such point x has |e_i . (x - c)| <= h_i
       !> (certified, `surface_boxes`).
       real(wp), allocatable :: node(:, :)
+      !> Support table (4, 6 support_n^2): for each cell of a cube map of directions
+      !> (`support_cell`), a surface point x0 (rows 1-3) and eps (row 4, rounded up) such that the
+      !> support function h(v) = max x . v over the surface points x is at most x0 . v + eps for
+      !> every unit v of the cell (shape units; `support_bound`). Built with the patch arrays,
+      !> dropped with them.
+      real(sp), allocatable :: supp(:, :)
    end type contact_body_type
 
 contains
@@ -382,6 +391,7 @@ contains
          return
       end if
       call fill_nodes(body, obb_c, obb_e, obb_h)
+      call support_table(body)
       call guaranteed_box(body)
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body
@@ -847,4 +857,259 @@ contains
          end do
       end do
    end subroutine synthesize_rows
+   !> Certified upper bound of the support function of the body's surface along v (body frame,
+   !> |v| = 1 up to rounding): h(v) = max over surface points x of x . v <= the result (shape units).
+   !> Two bodies whose supports along the line of centres u add up to less than the distance of
+   !> the centres are separated by the plane normal to u: a contact test that costs one table
+   !> read per body.
+   pure real(wp) function support_bound(body, v) result(h)
+      !> Body with its support table.
+      type(contact_body_type), intent(in) :: body
+      !> Direction, body frame.
+      real(wp), intent(in) :: v(3)
+      integer :: c
+      c = support_cell(v)
+      ! |v| = 1 + delta scales h by 1 + delta; rotations keep |delta| near 1e-16
+      h = real(body%supp(1, c), wp) * v(1) + real(body%supp(2, c), wp) * v(2) + real(body%supp(3, c), wp) * v(3) &
+          + real(body%supp(4, c), wp) * (1.0_wp + 1.0e-9_wp) + 1.0e-12_wp * body%r_max
+   end function support_bound
+
+   !> Cube-map cell (1..6 support_n^2, a column of `supp`) of a direction: the face of its largest component, then the
+   !> other two components over that one, in support_n equal steps each.
+   pure integer function support_cell(v) result(c)
+      real(wp), intent(in) :: v(3)
+      integer :: ax, f, ia, ib, a1, a2
+      real(wp) :: m
+      ax = 1
+      if (abs(v(2)) > abs(v(ax))) ax = 2
+      if (abs(v(3)) > abs(v(ax))) ax = 3
+      m = abs(v(ax))
+      f = 2 * (ax - 1) + merge(1, 2, v(ax) >= 0.0_wp)
+      a1 = 1 + mod(ax, 3)
+      a2 = 1 + mod(ax + 1, 3)
+      ia = min(support_n - 1, max(0, int((v(a1) / m + 1.0_wp) * (0.5_wp * support_n))))
+      ib = min(support_n - 1, max(0, int((v(a2) / m + 1.0_wp) * (0.5_wp * support_n))))
+      c = 1 + ia + support_n * (ib + support_n * (f - 1))
+   end function support_cell
+
+   !> Unit direction of face f at face coordinates (a, b) in [-1, 1] (the inverse of support_cell).
+   pure function face_direction(f, a, b) result(u)
+      integer, intent(in) :: f
+      real(wp), intent(in) :: a, b
+      real(wp) :: u(3)
+      integer :: ax
+      ax = (f + 1) / 2
+      u(ax) = merge(1.0_wp, -1.0_wp, mod(f, 2) == 1)
+      u(1 + mod(ax, 3)) = a
+      u(1 + mod(ax + 1, 3)) = b
+      u = u / norm2(u)
+   end function face_direction
+
+   !> The support table (`supp`). For each cube-map cell: the cap (centre u0, half-angle beta)
+   !> that holds it (cell edges are great-circle arcs, so its farthest point is a corner); a
+   !> surface point x0 that (nearly) attains the support along u0, rounded to single precision;
+   !> and eps >= max over the cap of h(v) - x0 . v, so that h(v) <= x0 . v + eps on the cell. As
+   !> x0 is about the gradient of h at u0, eps is of second order in beta. eps comes from a branch
+   !> and bound over the patch boxes of the node records moved by -x0: a box's largest projection
+   !> over the cap is bounded by max over the cap of c . v plus sum_i h_i max |e_i . v|, and a
+   !> patch is refined into its four children (down to leaf_level) while its bound exceeds a known
+   !> lower bound of the maximum.
+   pure subroutine support_table(body)
+      type(contact_body_type), intent(inout) :: body
+      integer :: f, ia, ib, cell, q
+      real(wp) :: u0(3), beta, corner(3), x0(3), xp(3), eps, a0, a1, b0, b1
+      allocate (body%supp(4, 6 * support_n**2))
+      do f = 1, 6
+         do ib = 0, support_n - 1
+            do ia = 0, support_n - 1
+               cell = 1 + ia + support_n * (ib + support_n * (f - 1))
+               a0 = -1.0_wp + 2.0_wp * ia / support_n
+               a1 = -1.0_wp + 2.0_wp * (ia + 1) / support_n
+               b0 = -1.0_wp + 2.0_wp * ib / support_n
+               b1 = -1.0_wp + 2.0_wp * (ib + 1) / support_n
+               u0 = face_direction(f, 0.5_wp * (a0 + a1), 0.5_wp * (b0 + b1))
+               beta = 0.0_wp
+               do q = 1, 4
+                  corner = face_direction(f, merge(a0, a1, q <= 2), merge(b0, b1, mod(q, 2) == 1))
+                  beta = max(beta, acos(min(1.0_wp, dot_product(u0, corner))))
+               end do
+               beta = min(pi, beta + 1.0e-6_wp)
+               ! x0: a stored surface point far along u0 (greedy descent), or the previous
+               ! cell's when that one projects further
+               call greedy_point(body, u0, x0)
+               if (cell > 1) then
+                  xp = real(body%supp(1:3, cell - 1), wp)
+                  if (dot_product(xp, u0) > dot_product(x0, u0)) x0 = xp
+               end if
+               x0 = real(real(x0, sp), wp)
+               call cap_search(body, u0, beta, x0, eps)
+               body%supp(1:3, cell) = real(x0, sp)
+               eps = max(eps, 0.0_wp) + 1.0e-12_wp * body%r_max
+               body%supp(4, cell) = real(eps, sp)
+               if (real(body%supp(4, cell), wp) < eps) body%supp(4, cell) = nearest(body%supp(4, cell), 1.0_sp)
+            end do
+         end do
+      end do
+   end subroutine support_table
+
+   !> A stored surface point r(u_k) u_k far along u0: a beam search that keeps, level by level,
+   !> the `beam` patches whose points project furthest along u0 and goes on with their children,
+   !> down to leaf_level; the best point seen.
+   pure subroutine greedy_point(body, u0, x)
+      type(contact_body_type), intent(in) :: body
+      real(wp), intent(in) :: u0(3)
+      real(wp), intent(out) :: x(3)
+      integer, parameter :: beam = 4
+      integer :: l, i, j, c, m, k, nkeep, nnext, keep(2, beam), nxt(2, beam)
+      real(wp) :: px, best, kv(beam), nv(beam)
+      best = -huge(1.0_wp)
+      x = 0.0_wp
+      nkeep = 0
+      do j = 1, patch_cols(0)
+         do i = 1, patch_rows(0)
+            k = patch_index(body, 0, i, j)
+            px = body%node(nd_rc, k) * dot_product(body%node(nd_dir:nd_dir + 2, k), u0)
+            if (px > best) then
+               best = px
+               x = body%node(nd_rc, k) * body%node(nd_dir:nd_dir + 2, k)
+            end if
+            call beam_insert(px, i, j, kv, keep, nkeep)
+         end do
+      end do
+      do l = 1, leaf_level
+         nnext = 0
+         do m = 1, nkeep
+            do c = 0, 3
+               i = 2 * keep(1, m) - 1 + mod(c, 2)
+               j = 2 * keep(2, m) - 1 + c / 2
+               k = patch_index(body, l, i, j)
+               px = body%node(nd_rc, k) * dot_product(body%node(nd_dir:nd_dir + 2, k), u0)
+               if (px > best) then
+                  best = px
+                  x = body%node(nd_rc, k) * body%node(nd_dir:nd_dir + 2, k)
+               end if
+               call beam_insert(px, i, j, nv, nxt, nnext)
+            end do
+         end do
+         keep = nxt
+         kv = nv
+         nkeep = nnext
+      end do
+   end subroutine greedy_point
+
+   !> Keep the size(v) largest values seen in v(1:n), decreasing, with their patch indices ij.
+   pure subroutine beam_insert(px, i, j, v, ij, n)
+      real(wp), intent(in) :: px
+      integer, intent(in) :: i, j
+      real(wp), intent(inout) :: v(:)
+      integer, intent(inout) :: ij(:, :), n
+      integer :: p
+      if (n == size(v)) then
+         if (px <= v(n)) return
+         p = n
+      else
+         n = n + 1
+         p = n
+      end if
+      do while (p > 1)
+         if (v(p - 1) >= px) exit
+         v(p) = v(p - 1)
+         ij(:, p) = ij(:, p - 1)
+         p = p - 1
+      end do
+      v(p) = px
+      ij(:, p) = [i, j]
+   end subroutine beam_insert
+
+   !> Upper bound `upper` of max (x - x0) . v over the surface points x and the unit vectors v
+   !> within angle beta of u0: branch and bound over the patch boxes. A patch whose bound lies
+   !> above both the best bound so far and 0 (about the value at v = u0 when x0 is a surface
+   !> point) is replaced by its children, largest bound first; any other patch keeps its bound.
+   pure subroutine cap_search(body, u0, beta, x0, upper)
+      type(contact_body_type), intent(in) :: body
+      real(wp), intent(in) :: u0(3), beta, x0(3)
+      real(wp), intent(out) :: upper
+      integer, parameter :: stack_size = 64 * (leaf_level + 1)
+      integer :: k, l, i, j, top, stk(3, stack_size), c, o(4), ci(4), cj(4)
+      real(wp) :: cosb, sinb, chord, ub, sub(stack_size), cub(4)
+      cosb = cos(beta)
+      sinb = sin(beta)
+      chord = 2.0_wp * sin(0.5_wp * beta)
+      upper = 0.0_wp
+      top = 0
+      do j = 1, patch_cols(0)
+         do i = 1, patch_rows(0)
+            top = top + 1
+            stk(:, top) = [0, i, j]
+            sub(top) = box_cap_support(body%node(:, patch_index(body, 0, i, j)), x0, u0, cosb, sinb, chord)
+         end do
+      end do
+      do while (top > 0)
+         l = stk(1, top)
+         i = stk(2, top)
+         j = stk(3, top)
+         ub = sub(top)
+         top = top - 1
+         if (ub <= upper) cycle
+         if (l == leaf_level) then
+            upper = ub
+            cycle
+         end if
+         do c = 1, 4
+            ci(c) = 2 * i - 1 + mod(c - 1, 2)
+            cj(c) = 2 * j - 1 + (c - 1) / 2
+            k = patch_index(body, l + 1, ci(c), cj(c))
+            cub(c) = box_cap_support(body%node(:, k), x0, u0, cosb, sinb, chord)
+         end do
+         ! push in increasing order of bound: the largest is refined first
+         o = [1, 2, 3, 4]
+         call sort4(cub, o)
+         do c = 1, 4
+            if (cub(o(c)) <= upper) cycle
+            top = top + 1
+            stk(:, top) = [l + 1, ci(o(c)), cj(o(c))]
+            sub(top) = cub(o(c))
+         end do
+      end do
+   end subroutine cap_search
+
+   !> Indices o of four values in increasing order of v(o).
+   pure subroutine sort4(v, o)
+      real(wp), intent(in) :: v(4)
+      integer, intent(inout) :: o(4)
+      integer :: a, b, t
+      do a = 2, 4
+         t = o(a)
+         b = a - 1
+         do while (b >= 1)
+            if (v(o(b)) <= v(t)) exit
+            o(b + 1) = o(b)
+            b = b - 1
+         end do
+         o(b + 1) = t
+      end do
+   end subroutine sort4
+
+   !> Upper bound, over the unit vectors v within angle beta of u0, of the largest projection
+   !> (x - x0) . v of a patch's box (node record: centre c, unit axes e_i, half-extents h_i):
+   !> max (c - x0) . v (exact over the cap) + sum_i h_i (|e_i . u0| + chord), chord = |v - u0| max.
+   pure real(wp) function box_cap_support(nd, x0, u0, cosb, sinb, chord) result(s)
+      real(wp), intent(in) :: nd(:), x0(3), u0(3), cosb, sinb, chord
+      real(wp) :: w(3), wn, c, e(3)
+      integer :: i
+      w = nd(nd_c:nd_c + 2) - x0
+      wn = norm2(w)
+      c = dot_product(w, u0)
+      if (c >= wn * cosb) then
+         s = wn
+      else
+         s = c * cosb + sqrt(max(0.0_wp, wn * wn - c * c)) * sinb
+      end if
+      s = s * (1.0_wp + 1.0e-13_wp) + 1.0e-13_wp * wn
+      do i = 1, 3
+         e = nd(nd_e + 3 * (i - 1):nd_e + 3 * i - 1)
+         s = s + nd(nd_h + i - 1) * (abs(dot_product(e, u0)) + chord) * (1.0_wp + 1.0e-13_wp)
+      end do
+   end function box_cap_support
+
 end module anm_contact_body

@@ -3,7 +3,11 @@
 !> EOB method, staged as the thesis' Fig 2.2 with cheap stages first:
 !>  1. bounding spheres (certified r_max: apart -> no contact) and inscribed spheres (certified
 !>     r_min: overlap -> contact);
+!>  1b. support functions along the line of centres (`support_bound`, one table read per body):
+!>     a separating plane normal to the line, wider than the certified gap tolerance -> no contact;
 !>  2. overlap along the line of centres (two radius evaluations);
+!>  2b. (certified mode) the table's surface point of each body that reaches furthest towards the
+!>     other, tested inside the other (one radius evaluation each) -> contact;
 !>  3. extent boxes in the world and their intersection, the EOB (empty -> no contact);
 !>  4. for each body, its surface is tested against the other body through the patch hierarchy:
 !>     a patch whose shell-sector ball misses the EOB, or whose ball lies certainly outside the
@@ -39,7 +43,7 @@ module anm_contact_overlap
    use anm_core_kinds, only: wp, pi, two_pi
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, node_size, nd_dir, nd_cosa, &
-      & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
+      & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc, support_bound, support_cell
    implicit none
    private
 
@@ -162,7 +166,7 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
-      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
+      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol, va(3), vb(3)
       type(pose_type) :: pab, pba
       logical :: found, certain
       type(probe_type) :: pr
@@ -183,13 +187,34 @@ contains
          hit = nr_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params)
          return
       end if
-      ! stage 2: line of centres
       u = dvec / dist
-      ra = scale_a * body_a%shape%radius_dir(matmul(u, rot_a))
-      rb = scale_b * body_b%shape%radius_dir(-matmul(u, rot_b))
+      va = matmul(u, rot_a)
+      vb = -matmul(u, rot_b)
+      tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
+                             scale_b * maxval(body_b%box_hi - body_b%box_lo))
+      ! stage 1b: support functions along the line of centres (certified tables): a plane normal
+      ! to u separates the bodies by more than the gap tolerance, so no later stage could report
+      ! contact (certified mode reports gaps below tol)
+      if (allocated(body_a%supp) .and. allocated(body_b%supp)) then
+         if (scale_a * support_bound(body_a, va) + scale_b * support_bound(body_b, vb) + tol < dist) then
+            hit = .false.
+            return
+         end if
+      end if
+      ! stage 2: line of centres
+      ra = scale_a * body_a%shape%radius_dir(va)
+      rb = scale_b * body_b%shape%radius_dir(vb)
       if (ra + rb > dist) then
          hit = .true.
          return
+      end if
+      ! stage 2b (certified mode, which reports every true overlap): the surface points of A and of
+      ! B that reach furthest towards the other body (support tables), each tested against the
+      ! other body along the ray to its centre
+      if (params%certified .and. allocated(body_a%supp) .and. allocated(body_b%supp)) then
+         hit = reach_inside(body_a, center_a, rot_a, scale_a, va, body_b, center_b, rot_b, scale_b)
+         if (.not. hit) hit = reach_inside(body_b, center_b, rot_b, scale_b, vb, body_a, center_a, rot_a, scale_a)
+         if (hit) return
       end if
       ! stage 3: extent boxes and the EOB
       call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params%certified, &
@@ -203,8 +228,6 @@ contains
       call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, .true., cbox_lo, cbox_hi)
       pab = make_pose(center_a, rot_a, scale_a, center_b, rot_b, scale_b)
       pba = make_pose(center_b, rot_b, scale_b, center_a, rot_a, scale_a)
-      tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
-                             scale_b * maxval(body_b%box_hi - body_b%box_lo))
       hit = .true.
       ! stage 4a: the surfaces' box hierarchies traversed together inside the certified EOB; each
       ! leaf patch of A left in an unseparated pair is tested against B at once
@@ -238,6 +261,27 @@ contains
       if (found) return
       hit = .false.
    end function bodies_overlap
+
+   !> True when A's stored surface point of the support-table cell of v (body frame of A), moved
+   !> towards A's centre by more than its rounding, lies inside B: then the bodies overlap.
+   pure logical function reach_inside(a, ca, ra, sa, v, b, cb, rb, sb) result(inside)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, v(3), cb(3), rb(3, 3), sb
+      real(wp) :: x(3), y(3), d, shrink
+      integer :: c
+      c = support_cell(v)
+      ! the stored point is r(u) u to single precision (relative 6e-8, so its direction within
+      ! 1e-7 rad, where r changes by at most lipschitz 1e-7): pulled in by more than that
+      shrink = 1.0e-6_wp + 1.0e-6_wp * a%lipschitz / a%r_min
+      x = real(a%supp(1:3, c), wp) * (1.0_wp - shrink)
+      y = matmul(ca + sa * matmul(ra, x) - cb, rb) / sb
+      d = norm2(y)
+      if (d <= 0.0_wp) then
+         inside = .true.
+      else
+         inside = d < b%shape%radius_dir(y / d)
+      end if
+   end function reach_inside
 
    !> Thesis D_overlap (mm): the largest radial penetration, along rays to the other body's
    !> centre, of the surface points of either body on the N_box scan grid (theta_i =

@@ -420,6 +420,7 @@ contains
       if (allocated(body%col_cp)) deallocate (body%col_cp)
       if (allocated(body%col_sp)) deallocate (body%col_sp)
       if (allocated(body%node)) deallocate (body%node)
+      if (allocated(body%supp)) deallocate (body%supp)
    end subroutine strip_patches
 
    !> Cache key of a kind's base: order, N_ext, whether the patch arrays are kept, coefficients.
@@ -733,7 +734,8 @@ contains
       if (allocated(b%node)) n = n + 8_int64 * (size(b%dir) + size(b%cosa) + size(b%sina) + size(b%rlo) + size(b%rhi) &
                                                + size(b%ball) + size(b%brad) + size(b%row_ct) + size(b%row_st) &
                                                + size(b%row_cosa) + size(b%row_sina) + size(b%col_cp) + size(b%col_sp) &
-                                               + size(b%node)) + 4_int64 * (size(b%dlo) + size(b%dhi))
+                                               + size(b%node)) + 4_int64 * (size(b%dlo) + size(b%dhi) &
+                                               + size(b%supp))
    end function body_bytes
 
    !> Memory held by an expansion (bytes): coefficients and Legendre table.
