@@ -960,39 +960,34 @@ contains
       real(wp), intent(in) :: u0(3)
       real(wp), intent(out) :: x(3)
       integer, parameter :: beam = 4
-      integer :: l, i, j, c, m, k, nkeep, nnext, keep(2, beam), nxt(2, beam)
-      real(wp) :: px, best, kv(beam), nv(beam)
+      integer :: l, i, j, c, m, k, nkeep, nnext, ncand, keep(2, beam), nxt(2, beam)
+      real(wp) :: px, best, nv(beam), y(3)
       best = -huge(1.0_wp)
       x = 0.0_wp
       nkeep = 0
-      do j = 1, patch_cols(0)
-         do i = 1, patch_rows(0)
-            k = patch_index(body, 0, i, j)
-            px = body%node(nd_rc, k) * dot_product(body%node(nd_dir:nd_dir + 2, k), u0)
+      do l = 0, leaf_level
+         ! level 0: every patch; deeper: the four children of each kept patch
+         ncand = merge(patch_rows(0) * patch_cols(0), 4 * nkeep, l == 0)
+         nnext = 0
+         do m = 1, ncand
+            if (l == 0) then
+               i = 1 + mod(m - 1, patch_rows(0))
+               j = 1 + (m - 1) / patch_rows(0)
+            else
+               c = mod(m - 1, 4)
+               i = 2 * keep(1, (m - 1) / 4 + 1) - 1 + mod(c, 2)
+               j = 2 * keep(2, (m - 1) / 4 + 1) - 1 + c / 2
+            end if
+            k = patch_index(body, l, i, j)
+            y = body%node(nd_rc, k) * body%node(nd_dir:nd_dir + 2, k)
+            px = dot_product(y, u0)
             if (px > best) then
                best = px
-               x = body%node(nd_rc, k) * body%node(nd_dir:nd_dir + 2, k)
+               x = y
             end if
-            call beam_insert(px, i, j, kv, keep, nkeep)
-         end do
-      end do
-      do l = 1, leaf_level
-         nnext = 0
-         do m = 1, nkeep
-            do c = 0, 3
-               i = 2 * keep(1, m) - 1 + mod(c, 2)
-               j = 2 * keep(2, m) - 1 + c / 2
-               k = patch_index(body, l, i, j)
-               px = body%node(nd_rc, k) * dot_product(body%node(nd_dir:nd_dir + 2, k), u0)
-               if (px > best) then
-                  best = px
-                  x = body%node(nd_rc, k) * body%node(nd_dir:nd_dir + 2, k)
-               end if
-               call beam_insert(px, i, j, nv, nxt, nnext)
-            end do
+            call beam_insert(px, i, j, nv, nxt, nnext)
          end do
          keep = nxt
-         kv = nv
          nkeep = nnext
       end do
    end subroutine greedy_point
