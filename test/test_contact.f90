@@ -14,7 +14,7 @@ module test_contact
    use anm_geometry_rotation, only: random_rotation, world_to_body, body_to_world
    use anm_contact_body, only: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, &
       & patch_cols, patch_index, patch_geometry, patch_bounds, slope_bound, nd_c, nd_e, nd_h, nd_r, nd_rc, nd_dir, &
-      & support_bound
+      & support_bound, support_cell
    use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_depth, &
       & body_crosses_walls, sector_range, boxes_disjoint
    use anm_contact_studies, only: thesis_overlap_depth
@@ -98,7 +98,7 @@ contains
          do n = 1, 5000
             v = [rng%normal(), rng%normal(), rng%normal()]
             v = v / norm2(v)
-            h = support_bound(body, v)
+            h = support_bound(body, v, support_cell(v))
             hs = maxval(matmul(v, pts))
             if (h < hs) then
                call fatal_error(error, trim(label)//": support bound "//to_string(h)//" below a surface point's " &
@@ -132,8 +132,8 @@ contains
       type(contact_body_type) :: with(nshape), without(nshape)
       type(contact_params_type) :: cert
       type(rng_type) :: rng
-      real(wp) :: rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), t, sa, sb, lo, hi
-      integer :: io, k, n, ia, ib, nhit, ndiff, nsep, nreach
+      real(wp) :: rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), t, sa, sb, lo, hi, va(3), vb(3)
+      integer :: io, k, n, ia, ib, nhit, ndiff, nsep
       logical :: h1, h0
       integer, parameter :: orders(2) = [5, 14]
       call shapes_dir(dir, error)
@@ -152,7 +152,6 @@ contains
          nhit = 0
          ndiff = 0
          nsep = 0
-         nreach = 0
          ca = 0.0_wp
          do n = 1, 3000
             ia = 1 + mod(n, nshape)
@@ -172,8 +171,10 @@ contains
             if (h0) nhit = nhit + 1
             if (h1 .neqv. h0) ndiff = ndiff + 1
             ! which pairs the new stages decide (their own tests, as bodies_overlap applies them)
-            if (sa * support_bound(with(ia), matmul(u, rota)) + sb * support_bound(with(ib), -matmul(u, rotb)) &
-                < norm2(cb)) nsep = nsep + 1
+            va = matmul(u, rota)
+            vb = -matmul(u, rotb)
+            if (sa * support_bound(with(ia), va, support_cell(va)) &
+                + sb * support_bound(with(ib), vb, support_cell(vb)) < norm2(cb)) nsep = nsep + 1
          end do
          write (output_unit, '(4x,a,i0,a,i0,a,i0,a,i0)') "order ", orders(io), ": 3000 pairs, ", nhit, &
             " overlapping, separated by the support tables ", nsep, ", answers differing ", ndiff

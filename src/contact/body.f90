@@ -862,20 +862,20 @@ contains
    !> Two bodies whose supports along the line of centres u add up to less than the distance of
    !> the centres are separated by the plane normal to u: a contact test that costs one table
    !> read per body.
-   pure real(wp) function support_bound(body, v) result(h)
+   pure real(wp) function support_bound(body, v, c) result(h)
       !> Body with its support table.
       type(contact_body_type), intent(in) :: body
       !> Direction, body frame.
       real(wp), intent(in) :: v(3)
-      integer :: c
-      c = support_cell(v)
+      !> Its cell, support_cell(v) (the contact test reads the cell's point again in stage 2b).
+      integer, intent(in) :: c
       ! |v| = 1 + delta scales h by 1 + delta; rotations keep |delta| near 1e-16
       h = real(body%supp(1, c), wp) * v(1) + real(body%supp(2, c), wp) * v(2) + real(body%supp(3, c), wp) * v(3) &
           + real(body%supp(4, c), wp) * (1.0_wp + 1.0e-9_wp) + 1.0e-12_wp * body%r_max
    end function support_bound
 
-   !> Cube-map cell (1..6 support_n^2, a column of `supp`) of a direction: the face of its largest component, then the
-   !> other two components over that one, in support_n equal steps each.
+   !> Cube-map cell (1..6 support_n^2, a column of `supp`) of a direction: the face of its largest
+   !> component, then the other two components over that one, in support_n equal steps each.
    pure integer function support_cell(v) result(c)
       real(wp), intent(in) :: v(3)
       integer :: ax, f, ia, ib, a1, a2

@@ -168,9 +168,9 @@ contains
       type(contact_params_type), intent(in) :: params
       real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol, va(3), vb(3)
       type(pose_type) :: pab, pba
-      logical :: found, certain
+      logical :: found, certain, tables
       type(probe_type) :: pr
-      integer :: status
+      integer :: status, ka, kb
 
       dvec = center_b - center_a
       dist = sqrt(sum(dvec**2))
@@ -195,8 +195,11 @@ contains
       ! stage 1b: support functions along the line of centres (certified tables): a plane normal
       ! to u separates the bodies by more than the gap tolerance, so no later stage could report
       ! contact (certified mode reports gaps below tol)
-      if (allocated(body_a%supp) .and. allocated(body_b%supp)) then
-         if (scale_a * support_bound(body_a, va) + scale_b * support_bound(body_b, vb) + tol < dist) then
+      tables = allocated(body_a%supp) .and. allocated(body_b%supp)
+      if (tables) then
+         ka = support_cell(va)
+         kb = support_cell(vb)
+         if (scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb) + tol < dist) then
             hit = .false.
             return
          end if
@@ -211,9 +214,9 @@ contains
       ! stage 2b (certified mode, which reports every true overlap): the surface points of A and of
       ! B that reach furthest towards the other body (support tables), each tested against the
       ! other body along the ray to its centre
-      if (params%certified .and. allocated(body_a%supp) .and. allocated(body_b%supp)) then
-         hit = reach_inside(body_a, center_a, rot_a, scale_a, va, body_b, center_b, rot_b, scale_b)
-         if (.not. hit) hit = reach_inside(body_b, center_b, rot_b, scale_b, vb, body_a, center_a, rot_a, scale_a)
+      if (params%certified .and. tables) then
+         hit = reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b)
+         if (.not. hit) hit = reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)
          if (hit) return
       end if
       ! stage 3: extent boxes and the EOB
@@ -262,14 +265,13 @@ contains
       hit = .false.
    end function bodies_overlap
 
-   !> True when A's stored surface point of the support-table cell of v (body frame of A), moved
-   !> towards A's centre by more than its rounding, lies inside B: then the bodies overlap.
-   pure logical function reach_inside(a, ca, ra, sa, v, b, cb, rb, sb) result(inside)
+   !> True when A's stored surface point of support-table cell c, moved towards A's centre by more
+   !> than its rounding, lies inside B: then the bodies overlap.
+   pure logical function reach_inside(a, ca, ra, sa, c, b, cb, rb, sb) result(inside)
       type(contact_body_type), intent(in) :: a, b
-      real(wp), intent(in) :: ca(3), ra(3, 3), sa, v(3), cb(3), rb(3, 3), sb
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      integer, intent(in) :: c
       real(wp) :: x(3), y(3), d, shrink
-      integer :: c
-      c = support_cell(v)
       ! the stored point is r(u) u to single precision (relative 6e-8, so its direction within
       ! 1e-7 rad, where r changes by at most lipschitz 1e-7): pulled in by more than that
       shrink = 1.0e-6_wp + 1.0e-6_wp * a%lipschitz / a%r_min
