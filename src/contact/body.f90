@@ -35,7 +35,8 @@ module anm_contact_body
    private
 
    public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
-      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, support_bound, support_cell
+      & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, support_bound, support_cell, &
+      & add_support_table
    public :: node_size, nd_dir, nd_cosa, nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
@@ -111,8 +112,9 @@ module anm_contact_body
       !> Support table (4, 6 support_n^2): for each cell of a cube map of directions
       !> (`support_cell`), a surface point x0 (rows 1-3) and eps (row 4, rounded up) such that the
       !> support function h(v) = max x . v over the surface points x is at most x0 . v + eps for
-      !> every unit v of the cell (shape units; `support_bound`). Built with the patch arrays,
-      !> dropped with them.
+      !> every unit v of the cell (shape units; `support_bound`). Built with the patch arrays
+      !> unless new_contact_body is told not to (`add_support_table` later), dropped with them;
+      !> the contact test uses it when both bodies have one and gives the same answers without.
       real(sp), allocatable :: supp(:, :)
    end type contact_body_type
 
@@ -250,8 +252,9 @@ contains
    !> Pass 1 samples r on the whole certification grid (for the certified bound M); pass 2 goes
    !> through the grid one leaf row (8 cell rows) at a time, sampling the derivatives of r there,
    !> and sets the cell bounds, the stored bounds of the leaf and deeper patches and the leaf
-   !> boxes of that row; coarser patches follow from their children.
-   subroutine new_contact_body(body, shape, error, nused, next)
+   !> boxes of that row; coarser patches follow from their children. The support table last
+   !> (about a third of the time at order 14), unless `table` is false.
+   subroutine new_contact_body(body, shape, error, nused, next, table)
       !> Contact data to build.
       type(contact_body_type), intent(out) :: body
       !> Star-shaped surface r(theta, phi) (a particle, or a particle-plus-shell outer surface).
@@ -262,6 +265,8 @@ contains
       integer, intent(in), optional :: nused
       !> N_ext of the thesis extent box stored in ext_lo/ext_hi (default 40).
       integer, intent(in), optional :: next
+      !> Whether the support table is built (default true; `add_support_table` builds it later).
+      logical, intent(in), optional :: table
       integer, parameter :: kb = cells_per_leaf
       real(wp), allocatable :: rg(:, :), rt(:, :), rp(:, :), h11(:, :), h12(:, :), h22(:, :), clo(:, :), chi(:, :), &
                                dcr(:), obb_c(:, :), obb_e(:, :, :), obb_h(:, :), trig(:, :), bv(:, :, :), w(:, :)
@@ -391,10 +396,22 @@ contains
          return
       end if
       call fill_nodes(body, obb_c, obb_e, obb_h)
-      call support_table(body)
+      if (.not. present(table)) then
+         call support_table(body)
+      else if (table) then
+         call support_table(body)
+      end if
       call guaranteed_box(body)
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body
+
+   !> Build the support table of a body that has its patch arrays but no table yet (nothing
+   !> otherwise): the contact test's answers do not change, only how soon the easy ones come.
+   pure subroutine add_support_table(body)
+      !> Body built by new_contact_body(..., table=.false.).
+      type(contact_body_type), intent(inout) :: body
+      if (allocated(body%node) .and. .not. allocated(body%supp)) call support_table(body)
+   end subroutine add_support_table
 
    !> Sines and cosines of the grid's polar angles pi i/ntg (rows 1, 2) and azimuths 2 pi j/npg
    !> (rows 3, 4).
@@ -761,8 +778,8 @@ contains
       real(wp), allocatable :: p(:), dp(:), mps(:), cs(:, :), sn(:, :), cc(:, :), sc(:, :), acc(:, :, :), ctab(:), &
                                stab(:)
       integer, allocatable :: idx_out(:)
-      integer :: nmax, i, j, m, n, k, nh, q, par, nq, jj
-      real(wp) :: th, st, ct, pv, a, b, v(6)
+      integer :: nmax, i, j, m, n, k, nh, nhp, q, par, nq, jj, jb
+      real(wp) :: th, st, ct, pv, a, b, v(6), t(8, 6)
       logical :: derivs
 
       nmax = shape%nmax
@@ -770,7 +787,9 @@ contains
       derivs = present(rt)
       nq = merge(6, 1, derivs)
       allocate (p(packed_size(nmax + 1)), dp(packed_size(nmax)), mps(packed_size(nmax)), idx_out(0:nmax))
-      allocate (cs(0:nh, 0:nmax), sn(0:nh, 0:nmax), cc(nq, 0:nmax), sc(nq, 0:nmax), acc(0:nh, nq, 0:1), &
+      ! azimuths 0..nh padded to whole blocks of eight (0..nhp)
+      nhp = 8 * (nh / 8 + 1) - 1
+      allocate (cs(0:nhp, 0:nmax), sn(0:nhp, 0:nmax), cc(nq, 0:nmax), sc(nq, 0:nmax), acc(0:nhp, nq, 0:1), &
                 ctab(0:np - 1), stab(0:np - 1))
       k = 1
       do m = 0, nmax
@@ -782,7 +801,7 @@ contains
          stab(j) = sin(two_pi * j / np)
       end do
       do m = 0, nmax
-         do j = 0, nh
+         do j = 0, nhp
             cs(j, m) = ctab(mod(m * j, np))
             sn(j, m) = stab(mod(m * j, np))
          end do
@@ -822,16 +841,25 @@ contains
                sc(6, m) = -m * cc(2, m)
             end if
          end do
-         do m = 0, nmax
-            par = mod(m, 2)
-            do q = 1, nq
+         if (derivs) then
+            ! eight azimuths at a time, the six partial sums held together over m (each element
+            ! sees the same operations in the same order as in a sweep over whole rows)
+            do jb = 0, nhp, 8
+               do par = 0, min(1, nmax)
+                  call block_sums(cc, sc, cs(jb:jb + 7, :), sn(jb:jb + 7, :), par, nmax, t)
+                  acc(jb:jb + 7, :, par) = t
+               end do
+            end do
+         else
+            do m = 0, nmax
+               par = mod(m, 2)
                if (m <= 1) then
-                  acc(:, q, par) = cc(q, m) * cs(:, m) + sc(q, m) * sn(:, m)
+                  acc(:, 1, par) = cc(1, m) * cs(:, m) + sc(1, m) * sn(:, m)
                else
-                  acc(:, q, par) = acc(:, q, par) + cc(q, m) * cs(:, m) + sc(q, m) * sn(:, m)
+                  acc(:, 1, par) = acc(:, 1, par) + cc(1, m) * cs(:, m) + sc(1, m) * sn(:, m)
                end if
             end do
-         end do
+         end if
          if (nmax == 0) acc(:, :, 1) = 0.0_wp
          do j = 0, np
             jj = mod(j, np)
@@ -857,6 +885,40 @@ contains
          end do
       end do
    end subroutine synthesize_rows
+
+   !> t(:, q) = sum over m = par, par + 2, ... <= nmax of cc(q, m) cs(:, m) + sc(q, m) sn(:, m)
+   !> for the six quantities of synthesize_rows and eight azimuths, added in increasing m.
+   pure subroutine block_sums(cc, sc, cs, sn, par, nmax, t)
+      real(wp), intent(in) :: cc(:, 0:), sc(:, 0:), cs(:, 0:), sn(:, 0:)
+      integer, intent(in) :: par, nmax
+      real(wp), intent(out) :: t(8, 6)
+      real(wp) :: t1(8), t2(8), t3(8), t4(8), t5(8), t6(8), c(8), s(8)
+      integer :: m
+      c = cs(:, par)
+      s = sn(:, par)
+      t1 = cc(1, par) * c + sc(1, par) * s
+      t2 = cc(2, par) * c + sc(2, par) * s
+      t3 = cc(3, par) * c + sc(3, par) * s
+      t4 = cc(4, par) * c + sc(4, par) * s
+      t5 = cc(5, par) * c + sc(5, par) * s
+      t6 = cc(6, par) * c + sc(6, par) * s
+      do m = par + 2, nmax, 2
+         c = cs(:, m)
+         s = sn(:, m)
+         t1 = t1 + cc(1, m) * c + sc(1, m) * s
+         t2 = t2 + cc(2, m) * c + sc(2, m) * s
+         t3 = t3 + cc(3, m) * c + sc(3, m) * s
+         t4 = t4 + cc(4, m) * c + sc(4, m) * s
+         t5 = t5 + cc(5, m) * c + sc(5, m) * s
+         t6 = t6 + cc(6, m) * c + sc(6, m) * s
+      end do
+      t(:, 1) = t1
+      t(:, 2) = t2
+      t(:, 3) = t3
+      t(:, 4) = t4
+      t(:, 5) = t5
+      t(:, 6) = t6
+   end subroutine block_sums
    !> Certified upper bound of the support function of the body's surface along v (body frame,
    !> |v| = 1 up to rounding): h(v) = max over surface points x of x . v <= the result (shape units).
    !> Two bodies whose supports along the line of centres u add up to less than the distance of

@@ -148,6 +148,8 @@ contains
          do while (.not. res%reached .and. round < dp%rounds)
             if (out_of_time(dp, run)) exit
             round = round + 1
+            ! the moves test many pairs near contact: every body gets its support table
+            call ks%add_tables(pk%kinds, run%attempts, now=.true.)
             ! the sieve and the one before move: they open room for the next insertions (larger
             ! particles are settled, and moving them among many small ones is costly)
             do j = 1, dp%sweeps

@@ -176,8 +176,8 @@ contains
       end do
    end subroutine load_sources
 
-   !> Lines about the kinds built (with shells: their number and memory) and the on-disk cache
-   !> (when it is on or could not be used).
+   !> Lines about the kinds built (with shells: their number and memory), the contact bodies given
+   !> support tables and the on-disk cache (when it is on or could not be used).
    subroutine cache_line(ks, kinds, unit)
       type(kind_set_type), intent(in) :: ks
       type(particle_kind_type), intent(in) :: kinds(:)
@@ -199,6 +199,7 @@ contains
             real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (shell contact body ", &
             real(shell, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
       end if
+      write (unit, '(a,i0,a)') "kinds: support tables built for ", ks%tables_built, " contact bodies"
       if (allocated(ks%exchange)) then
          if (ks%exchange%nranks > 1) write (unit, '(a,i0,a,i0,a,i0,a)') "kinds: built in shares by ", &
             ks%exchange%nranks, " processes: ", ks%exchange%built, " parts (bodies, shells) built by this one, ", &

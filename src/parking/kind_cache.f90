@@ -35,7 +35,7 @@ module anm_parking_kind_cache
       & put_body, get_body, put_expansion, get_expansion, fnv1a
 
    !> Version of the entry layout and of what the payloads hold; bump when they change.
-   integer, parameter :: cache_format_version = 2
+   integer, parameter :: cache_format_version = 3
    !> First bytes of every entry.
    character(len=8), parameter :: magic = "ANMKIND1"
    !> Header: magic, key length, payload length, payload hash.
@@ -269,7 +269,8 @@ contains
    end subroutine store
 
    !> A contact body's data except its shape (the caller knows it): the certified scalars and,
-   !> when `full`, the patch arrays.
+   !> when `full`, the patch arrays (not the support table: the kinds build it when their use
+   !> pays for it, anm_parking_kinds).
    subroutine put_body(w, body, full)
       !> Buffer.
       type(byte_writer_type), intent(inout) :: w
@@ -287,7 +288,6 @@ contains
       call w%put(size(body%dlo))
       call w%put(size(body%row_ct))
       call w%put(size(body%col_cp))
-      call w%put(size(body%supp))
       call w%put(body%dir)
       call w%put(body%cosa)
       call w%put(body%sina)
@@ -304,7 +304,6 @@ contains
       call w%put(body%col_cp)
       call w%put(body%col_sp)
       call w%put(body%node)
-      call w%put(reshape(body%supp, [size(body%supp)]))
    end subroutine put_body
 
    !> Read what put_body wrote (the shape is set by the caller); r%bad on a malformed payload.
@@ -313,10 +312,8 @@ contains
       type(byte_reader_type), intent(inout) :: r
       !> Body (its shape untouched).
       type(contact_body_type), intent(inout) :: body
-      integer :: i2(2), offs(size(body%off) + size(body%doff) + size(body%roff) + size(body%coff)), full, np, nd, nr, nc, &
-                 ns
+      integer :: i2(2), offs(size(body%off) + size(body%doff) + size(body%roff) + size(body%coff)), full, np, nd, nr, nc
       real(wp) :: x(17)
-      real(sp), allocatable :: supp(:)
       integer :: a, b
       call r%get(i2)
       call r%get(x)
@@ -350,17 +347,15 @@ contains
       call r%get(nd)
       call r%get(nr)
       call r%get(nc)
-      call r%get(ns)
       ! sizes that do not fit the rest of the payload make it malformed (never allocated)
-      if (r%bad .or. min(np, nd, nr, nc, ns) < 0 .or. mod(ns, 4) /= 0 .or. &
-          8_int64 * (int(np, int64) * (11 + node_size) + 4 * nr + 2 * nc) + 8_int64 * nd + 4_int64 * ns &
-          > size(r%b) - r%pos) then
+      if (r%bad .or. min(np, nd, nr, nc) < 0 .or. &
+          8_int64 * (int(np, int64) * (11 + node_size) + 4 * nr + 2 * nc) + 8_int64 * nd > size(r%b) - r%pos) then
          r%bad = .true.
          return
       end if
       allocate (body%dir(3, np), body%cosa(np), body%sina(np), body%rlo(np), body%rhi(np), body%ball(3, np), &
                 body%brad(np), body%dlo(nd), body%dhi(nd), body%row_ct(nr), body%row_st(nr), body%row_cosa(nr), &
-                body%row_sina(nr), body%col_cp(nc), body%col_sp(nc), body%node(node_size, np), supp(ns))
+                body%row_sina(nr), body%col_cp(nc), body%col_sp(nc), body%node(node_size, np))
       call get_reals2(r, body%dir)
       call r%get(body%cosa)
       call r%get(body%sina)
@@ -377,8 +372,6 @@ contains
       call r%get(body%col_cp)
       call r%get(body%col_sp)
       call get_reals2(r, body%node)
-      call r%get(supp)
-      body%supp = reshape(supp, [4, ns / 4])
    end subroutine get_body
 
    !> An expansion's degree and coefficients.

@@ -177,6 +177,8 @@ contains
          ! every process sizes the next batch alike
          if (allocated(rp%dist)) seconds = rp%dist%agree(seconds)
          call settle_batch(bt, pk, ap, rp, vg, st, run)
+         ! support tables once the attempts pay for them (no effect on the model)
+         call ks%add_tables(pk%kinds, run%attempts)
          ! slabs: the batch's particles out of this process' reach leave its cell list
          call pk%localize(bt%np_frozen + 1)
          ! slabs: moved now and then so that the processes' work evens out (no effect on the model)

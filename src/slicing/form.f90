@@ -42,7 +42,7 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(contact_body_type) :: body
 
-      call new_contact_body(body, shape, error, nused=shape%nmax)
+      call new_contact_body(body, shape, error, nused=shape%nmax, table=.false.)
       if (allocated(error)) return
       form%shape = body%shape
       form%r_min = body%r_min
