@@ -31,12 +31,13 @@ module anm_contact_body
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
    use anm_sh_legendre, only: legendre_values, legendre_theta_derivatives, packed_size
    use anm_geometry_extent, only: extent_scan
+   use anm_geometry_radial_bound, only: radial_bound_type
    implicit none
    private
 
    public :: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, support_bound, support_cell, &
-      & add_support_table
+      & add_support_table, radial_bound
    public :: node_size, nd_dir, nd_cosa, nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc
 
    !> Finest stored patch level (64 x 128 patches of pi/64 rad).
@@ -978,24 +979,14 @@ contains
    !> lower bound of the maximum.
    pure subroutine support_table(body)
       type(contact_body_type), intent(inout) :: body
-      integer :: f, ia, ib, cell, q
-      real(wp) :: u0(3), beta, corner(3), x0(3), xp(3), eps, a0, a1, b0, b1
+      integer :: f, ia, ib, cell
+      real(wp) :: u0(3), beta, x0(3), xp(3), eps
       allocate (body%supp(4, 6 * support_n**2))
       do f = 1, 6
          do ib = 0, support_n - 1
             do ia = 0, support_n - 1
                cell = 1 + ia + support_n * (ib + support_n * (f - 1))
-               a0 = -1.0_wp + 2.0_wp * ia / support_n
-               a1 = -1.0_wp + 2.0_wp * (ia + 1) / support_n
-               b0 = -1.0_wp + 2.0_wp * ib / support_n
-               b1 = -1.0_wp + 2.0_wp * (ib + 1) / support_n
-               u0 = face_direction(f, 0.5_wp * (a0 + a1), 0.5_wp * (b0 + b1))
-               beta = 0.0_wp
-               do q = 1, 4
-                  corner = face_direction(f, merge(a0, a1, q <= 2), merge(b0, b1, mod(q, 2) == 1))
-                  beta = max(beta, acos(min(1.0_wp, dot_product(u0, corner))))
-               end do
-               beta = min(pi, beta + 1.0e-6_wp)
+               call cube_cap(support_n, f, ia, ib, u0, beta)
                ! x0: a stored surface point far along u0 (greedy descent), or the previous
                ! cell's when that one projects further
                call greedy_point(body, u0, x0)
@@ -1013,6 +1004,91 @@ contains
          end do
       end do
    end subroutine support_table
+
+   !> Cap (centre u0, half-angle beta) holding cell (ia, ib) of face f of a cube map of n x n
+   !> cells per face: the farthest corner (cell edges are great-circle arcs) plus 1e-6 rad.
+   pure subroutine cube_cap(n, f, ia, ib, u0, beta)
+      integer, intent(in) :: n, f, ia, ib
+      real(wp), intent(out) :: u0(3), beta
+      real(wp) :: corner(3), a0, a1, b0, b1
+      integer :: q
+      a0 = -1.0_wp + 2.0_wp * ia / n
+      a1 = -1.0_wp + 2.0_wp * (ia + 1) / n
+      b0 = -1.0_wp + 2.0_wp * ib / n
+      b1 = -1.0_wp + 2.0_wp * (ib + 1) / n
+      u0 = face_direction(f, 0.5_wp * (a0 + a1), 0.5_wp * (b0 + b1))
+      beta = 0.0_wp
+      do q = 1, 4
+         corner = face_direction(f, merge(a0, a1, q <= 2), merge(b0, b1, mod(q, 2) == 1))
+         beta = max(beta, acos(min(1.0_wp, dot_product(u0, corner))))
+      end do
+      beta = min(pi, beta + 1.0e-6_wp)
+   end subroutine cube_cap
+
+   !> Certified upper bounds of r per cell of a cube map of n x n cells per face
+   !> (anm_geometry_radial_bound): the largest leaf-patch bound rhi among the leaf patches whose
+   !> caps meet the cell's cap, found by descending the patch tree from level 0. A body without
+   !> its patch arrays gives no bounds (rb%n = 0).
+   pure function radial_bound(body, n) result(rb)
+      !> Body with its patch arrays.
+      type(contact_body_type), intent(in) :: body
+      !> Cells per face edge (16: cells of about 0.1 rad).
+      integer, intent(in) :: n
+      type(radial_bound_type) :: rb
+      integer, parameter :: stack_size = 4 * (leaf_level + 1) * 8 + 32
+      integer :: f, ia, ib, top, l, i, j, k, c, stk(3, stack_size)
+      real(wp) :: u0(3), beta, cosb, sinb, hi
+      if (.not. allocated(body%rhi)) return
+      rb%n = n
+      allocate (rb%rmax(6 * n**2))
+      do f = 1, 6
+         do ib = 0, n - 1
+            do ia = 0, n - 1
+               call cube_cap(n, f, ia, ib, u0, beta)
+               cosb = cos(beta + 1.0e-9_wp)
+               sinb = sin(beta + 1.0e-9_wp)
+               hi = 0.0_wp
+               top = 0
+               do j = 1, patch_cols(0)
+                  do i = 1, patch_rows(0)
+                     top = top + 1
+                     stk(:, top) = [0, i, j]
+                  end do
+               end do
+               do while (top > 0)
+                  l = stk(1, top)
+                  i = stk(2, top)
+                  j = stk(3, top)
+                  top = top - 1
+                  k = patch_index(body, l, i, j)
+                  if (body%rhi(k) <= hi) cycle
+                  if (.not. caps_meet(body%dir(:, k), body%cosa(k), body%sina(k), u0, cosb, sinb)) cycle
+                  if (l == leaf_level) then
+                     hi = body%rhi(k)
+                     cycle
+                  end if
+                  do c = 0, 3
+                     top = top + 1
+                     stk(:, top) = [l + 1, 2 * i - 1 + mod(c, 2), 2 * j - 1 + c / 2]
+                  end do
+               end do
+               rb%rmax(1 + ia + n * (ib + n * (f - 1))) = hi
+            end do
+         end do
+      end do
+   end function radial_bound
+
+   !> Whether two caps (unit centres d and u, half-angles alpha and beta given by their cos and
+   !> sin) may share a direction: angle(d, u) <= alpha + beta, with a rounding margin.
+   pure logical function caps_meet(d, cosa, sina, u, cosb, sinb)
+      real(wp), intent(in) :: d(3), cosa, sina, u(3), cosb, sinb
+      ! alpha + beta > pi (its sine negative): every direction
+      if (sina * cosb + cosa * sinb < 0.0_wp) then
+         caps_meet = .true.
+      else
+         caps_meet = dot_product(d, u) >= cosa * cosb - sina * sinb - 1.0e-12_wp
+      end if
+   end function caps_meet
 
    !> A stored surface point r(u_k) u_k far along u0: a beam search that keeps, level by level,
    !> the `beam` patches whose points project furthest along u0 and goes on with their children,

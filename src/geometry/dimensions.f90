@@ -10,7 +10,9 @@
 !> W: for 180 directions d perpendicular to L, the surface sample is binned on the plane
 !> perpendicular to d and the span of d . x is taken per bin; the best (d, line) is then refined
 !> with exact chords (line-surface crossings by marching and bisection) by a compass search in the
-!> direction angle and the line offset. T: the same with d fixed to L x W.
+!> direction angle and the line offset. T: the same with d fixed to L x W. With certified radius
+!> bounds per direction (`bound`, anm_geometry_radial_bound) the marches skip the evaluation of r
+!> at points those bounds put outside: the same crossings, several times fewer evaluations.
 !>
 !> Usage:
 !>     call particle_dimensions(shape, grid, length, width, thickness, dir_l, dir_w, dir_t)
@@ -19,6 +21,7 @@ module anm_geometry_dimensions
    use anm_sh_expansion, only: sh_expansion_type
    use anm_sh_grid, only: sh_grid_type, sh_synthesize
    use anm_geometry_sphere_search, only: maximize_direction
+   use anm_geometry_radial_bound, only: radial_bound_type, surely_outside
    implicit none
    private
 
@@ -27,7 +30,7 @@ module anm_geometry_dimensions
 contains
 
    !> L, W, T and their unit directions (body frame).
-   subroutine particle_dimensions(shape, grid, length, width, thickness, dir_l, dir_w, dir_t)
+   subroutine particle_dimensions(shape, grid, length, width, thickness, dir_l, dir_w, dir_t, bound)
       !> Particle (already truncated to the order wanted).
       type(sh_expansion_type), intent(in) :: shape
       !> Dense grid for the surface sample.
@@ -36,6 +39,8 @@ contains
       real(wp), intent(out) :: length, width, thickness
       !> Directions of L, W, T (unit, mutually perpendicular).
       real(wp), intent(out) :: dir_l(3), dir_w(3), dir_t(3)
+      !> Certified radius bounds of `shape` (the same results, faster chord marches).
+      type(radial_bound_type), intent(in), optional :: bound
       real(wp), allocatable :: pts(:, :), r(:, :)
       real(wp) :: rmax, e1(3), e2(3), d(3), best, val, alpha, best_alpha, o1, o2, best_o(2)
       integer :: nt, np, npts, i, j, k, ia
@@ -74,7 +79,7 @@ contains
             best_o = [o1, o2]
          end if
       end do
-      call refine_chord(shape, rmax, dir_l, e1, e2, best_alpha, best_o, .true., best)
+      call refine_chord(shape, rmax, dir_l, e1, e2, best_alpha, best_o, .true., best, bound)
       width = best
       dir_w = cos(best_alpha) * e1 + sin(best_alpha) * e2
       dir_t = cross(dir_l, dir_w)
@@ -84,7 +89,7 @@ contains
       call binned_span(pts, dir_t, dir_l, rmax, best, o1, o2)
       best_o = [o1, o2]
       alpha = 0.0_wp
-      call refine_chord(shape, rmax, dir_l, dir_t, dir_w, alpha, best_o, .false., best)
+      call refine_chord(shape, rmax, dir_l, dir_t, dir_w, alpha, best_o, .false., best, bound)
       thickness = best
    end subroutine particle_dimensions
 
@@ -232,21 +237,28 @@ contains
    pure subroutine binned_span(pts, d, a, rmax, span, o1, o2)
       real(wp), intent(in) :: pts(:, :), d(3), a(3), rmax
       real(wp), intent(out) :: span, o1, o2
-      integer, parameter :: nb = 64
-      real(wp) :: smin(nb, nb), smax(nb, nb), b(3), h, s, c1, c2
-      integer :: i, i1, i2, loc(2)
+      integer, parameter :: nb = 64, blk = 512
+      real(wp) :: smin(nb, nb), smax(nb, nb), b(3), h, s(blk), c1, c2
+      integer :: i, i0, k, n, i1(blk), i2(blk), loc(2)
       b = cross(d, a)
       h = 2.0_wp * rmax / nb
       smin = huge(1.0_wp)
       smax = -huge(1.0_wp)
-      do i = 1, size(pts, 2)
-         c1 = dot_product(pts(:, i), a)
-         c2 = dot_product(pts(:, i), b)
-         s = dot_product(pts(:, i), d)
-         i1 = min(nb, max(1, 1 + int((c1 + rmax) / h)))
-         i2 = min(nb, max(1, 1 + int((c2 + rmax) / h)))
-         smin(i1, i2) = min(smin(i1, i2), s)
-         smax(i1, i2) = max(smax(i1, i2), s)
+      ! a block of points projected (a loop the compiler vectorises), then binned
+      do i0 = 0, size(pts, 2) - 1, blk
+         n = min(blk, size(pts, 2) - i0)
+         do k = 1, n
+            i = i0 + k
+            c1 = dot_product(pts(:, i), a)
+            c2 = dot_product(pts(:, i), b)
+            s(k) = dot_product(pts(:, i), d)
+            i1(k) = min(nb, max(1, 1 + int((c1 + rmax) / h)))
+            i2(k) = min(nb, max(1, 1 + int((c2 + rmax) / h)))
+         end do
+         do k = 1, n
+            smin(i1(k), i2(k)) = min(smin(i1(k), i2(k)), s(k))
+            smax(i1(k), i2(k)) = max(smax(i1(k), i2(k)), s(k))
+         end do
       end do
       where (smax < smin)
          smax = 0.0_wp
@@ -260,12 +272,13 @@ contains
 
    !> Refine a chord: maximise chord_span over the line offset (o1 along a, o2 along d x a) and,
    !> when `rotate`, the angle alpha of d = cos(alpha) e1 + sin(alpha) e2.
-   subroutine refine_chord(shape, rmax, a, e1, e2, alpha, o, rotate, span)
+   subroutine refine_chord(shape, rmax, a, e1, e2, alpha, o, rotate, span, bound)
       type(sh_expansion_type), intent(in) :: shape
       real(wp), intent(in) :: rmax, a(3), e1(3), e2(3)
       real(wp), intent(inout) :: alpha, o(2)
       logical, intent(in) :: rotate
       real(wp), intent(inout) :: span
+      type(radial_bound_type), intent(in), optional :: bound
       real(wp) :: h, ha, cand(3), fc, best(3), fbest, x(3)
       integer :: k, nvar, iter
       real(wp), parameter :: dirs(3, 6) = reshape([1.0_wp, 0.0_wp, 0.0_wp, -1.0_wp, 0.0_wp, 0.0_wp, &
@@ -308,20 +321,23 @@ contains
             d = e1
          end if
          b = cross(d, a)
-         f = chord_span(shape, v(1) * a + v(2) * b, d, rmax)
+         f = chord_span(shape, v(1) * a + v(2) * b, d, rmax, bound)
       end function eval
    end subroutine refine_chord
 
    !> Distance between the first and last crossing of the surface by the line o + s d
    !> (o perpendicular to the unit vector d); 0 if the line misses the body. Crossings are found
    !> by marching inward from |s| = sqrt(rmax^2 - |o|^2) in steps of rmax/400, then bisection.
-   function chord_span(shape, o, d, rmax) result(span)
+   function chord_span(shape, o, d, rmax, bound) result(span)
       !> Particle.
       type(sh_expansion_type), intent(in) :: shape
       !> Line offset (perpendicular to d) and unit direction.
       real(wp), intent(in) :: o(3), d(3)
       !> Bound on the radius of the particle.
       real(wp), intent(in) :: rmax
+      !> Certified radius bounds per direction: points beyond them are outside without evaluating
+      !> r (the same result).
+      type(radial_bound_type), intent(in), optional :: bound
       real(wp) :: span
       real(wp) :: s0, smax, smin, step, a, b, m
       integer :: k, it
@@ -390,7 +406,9 @@ contains
          if (len == 0.0_wp) then
             inside = .true.
          else
-            inside = len <= shape%radius_dir(p / len)
+            inside = .true.
+            if (present(bound)) inside = .not. surely_outside(bound, p, len)
+            if (inside) inside = len <= shape%radius_dir(p / len)
          end if
       end function inside
    end function chord_span

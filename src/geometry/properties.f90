@@ -12,6 +12,7 @@ module anm_geometry_properties
    use anm_geometry_integrals, only: surface_integrals
    use anm_geometry_extent, only: extent_scan, extent_refined
    use anm_geometry_dimensions, only: particle_dimensions
+   use anm_geometry_radial_bound, only: radial_bound_type
    implicit none
    private
 
@@ -55,7 +56,7 @@ contains
 
    !> Compute every property of `shape` truncated at degree `nused` (default: all coefficients).
    !> Extents use the refined search unless `next` (thesis N_ext scan) is given.
-   subroutine compute_geometry(shape, geom, nused, next, ntheta)
+   subroutine compute_geometry(shape, geom, nused, next, ntheta, bound)
       !> Particle shape.
       type(sh_expansion_type), intent(in) :: shape
       !> Result.
@@ -66,6 +67,9 @@ contains
       integer, intent(in), optional :: next
       !> Polar nodes of the quadrature grid (default geometry_grid_size(order)); nphi = 2 ntheta.
       integer, intent(in), optional :: ntheta
+      !> Certified radius bounds of the shape at the order used (anm_contact_body, radial_bound):
+      !> the same dimensions, found faster.
+      type(radial_bound_type), intent(in), optional :: bound
       type(sh_expansion_type) :: s
       type(sh_grid_type) :: grid
       integer :: nt
@@ -88,6 +92,6 @@ contains
          call extent_refined(s, grid, geom%extent_lo, geom%extent_hi)
       end if
       call particle_dimensions(s, grid, geom%length, geom%width, geom%thickness, &
-                               geom%dir_length, geom%dir_width, geom%dir_thickness)
+                               geom%dir_length, geom%dir_width, geom%dir_thickness, bound)
    end subroutine compute_geometry
 end module anm_geometry_properties

@@ -21,7 +21,7 @@ module anm_parking_kinds
    use anm_core_filesystem, only: string_type
    use anm_sh_expansion, only: sh_expansion_type, sh_truncate
    use anm_geometry_properties, only: shape_geometry_type, compute_geometry
-   use anm_contact_body, only: contact_body_type, new_contact_body, add_support_table
+   use anm_contact_body, only: contact_body_type, new_contact_body, add_support_table, radial_bound
    use anm_shells_build, only: shell_report_type, build_layers
    use anm_config_shells, only: shell_mode
    use anm_shells_thickness, only: thickness_unit, thickness_to_shape_units
@@ -704,12 +704,13 @@ contains
       type(shape_geometry_type) :: g
       type(sh_expansion_type) :: s
       s = sh_truncate(shape, kd%order)
-      call compute_geometry(s, g)
+      ! the body first: its certified radius bounds speed up the dimensions' chord marches
+      call new_contact_body(kd%body, s, error, next=p%n_ext, table=.false.)
+      if (allocated(error)) return
+      call compute_geometry(s, g, bound=radial_bound(kd%body, 16))
       kd%width = g%width
       kd%length = g%length
       kd%volume = g%volume
-      call new_contact_body(kd%body, s, error, next=p%n_ext, table=.false.)
-      if (allocated(error)) return
       kd%r_out = kd%body%r_max
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
