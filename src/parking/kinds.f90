@@ -802,8 +802,8 @@ contains
       type(sh_expansion_type), intent(in) :: e
       n = storage_size(e) / 8
       if (allocated(e%a)) n = n + 8_int64 * (size(e%a) + size(e%b))
-      if (allocated(e%table%ca)) n = n + 8_int64 * (size(e%table%ca) + size(e%table%cb) + size(e%table%sect)) &
-                                     + 4_int64 * size(e%table%idx)
+      if (allocated(e%table%ca)) n = n + 8_int64 * (size(e%table%ca) + size(e%table%cb) + size(e%table%sect) &
+                                                    + size(e%table%dq)) + 4_int64 * size(e%table%idx)
    end function expansion_bytes
 
    !> The on-disk cache folder from the environment: ANM_CACHE ('' when unset; 'off' disables).

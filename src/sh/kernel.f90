@@ -123,7 +123,7 @@ contains
 
    !> r, sin(theta) dr/dtheta and dr/dphi at one direction off the poles (s > 0). The theta
    !> derivative uses sin(theta) dPbar_n^m/dtheta = n x Pbar_n^m - f_nm Pbar_{n-1}^m with
-   !> f_nm = (2n+1)/ca.
+   !> f_nm = (2n+1)/ca (`legendre_table_type%dq`).
    pure subroutine sh_sum_slope(table, a, b, nmax, x, s, cp, sp, r, rt, rp)
       !> Recursion table of degree >= nmax + 1.
       type(legendre_table_type), intent(in) :: table
@@ -167,7 +167,7 @@ contains
             v1 = v2
             acc_a = acc_a + a(n, m) * v1
             acc_b = acc_b + b(n, m) * v1
-            v2 = n * x * v1 - (2 * n + 1) / table%ca(k0 + n - m) * v0
+            v2 = n * x * v1 - table%dq(k0 + n - m) * v0
             dt_a = dt_a + a(n, m) * v2
             dt_b = dt_b + b(n, m) * v2
          end do

@@ -32,6 +32,9 @@ module anm_sh_legendre
       real(wp), allocatable :: ca(:), cb(:)
       !> Sectoral factors sqrt((2m+1)/(2m)), m = 1..nmax.
       real(wp), allocatable :: sect(:)
+      !> (2n+1)/ca(k) for n > m (0 for n = m), packed like ca: the theta-derivative factor of
+      !> sh_sum_slope, divided once here rather than at every evaluation.
+      real(wp), allocatable :: dq(:)
    end type legendre_table_type
 
 contains
@@ -53,7 +56,8 @@ contains
       real(wp) :: rn, rm
 
       table%nmax = nmax
-      allocate (table%idx(0:nmax + 1), table%ca(packed_size(nmax)), table%cb(packed_size(nmax)))
+      allocate (table%idx(0:nmax + 1), table%ca(packed_size(nmax)), table%cb(packed_size(nmax)), &
+                table%dq(packed_size(nmax)))
       allocate (table%sect(max(1, nmax)))
       k = 1
       do m = 0, nmax
@@ -72,6 +76,8 @@ contains
                table%ca(k) = 0.0_wp
                table%cb(k) = 0.0_wp
             end if
+            table%dq(k) = 0.0_wp
+            if (n > m) table%dq(k) = (2 * n + 1) / table%ca(k)
             k = k + 1
          end do
       end do
