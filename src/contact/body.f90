@@ -940,20 +940,12 @@ contains
    !> Cube-map cell (1..6 support_n^2, a column of `supp`) of a direction: the face of its largest
    !> component, then the other two components over that one, in support_n equal steps each.
    pure integer function support_cell(v) result(c)
+      !> Direction (any length > 0).
       real(wp), intent(in) :: v(3)
-      integer :: ax, f, ia, ib, a1, a2
-      real(wp) :: m
-      ax = 1
-      if (abs(v(2)) > abs(v(ax))) ax = 2
-      if (abs(v(3)) > abs(v(ax))) ax = 3
-      m = abs(v(ax))
-      f = 2 * (ax - 1) + merge(1, 2, v(ax) >= 0.0_wp)
-      a1 = 1 + mod(ax, 3)
-      a2 = 1 + mod(ax + 1, 3)
-      ia = min(support_n - 1, max(0, int((v(a1) / m + 1.0_wp) * (0.5_wp * support_n))))
-      ib = min(support_n - 1, max(0, int((v(a2) / m + 1.0_wp) * (0.5_wp * support_n))))
-      c = 1 + ia + support_n * (ib + support_n * (f - 1))
+      c = cube_cell(support_n, v)
    end function support_cell
+
+   include "anm_cube_cell.inc"
 
    !> Unit direction of face f at face coordinates (a, b) in [-1, 1] (the inverse of support_cell).
    pure function face_direction(f, a, b) result(u)

@@ -26,24 +26,13 @@ module anm_geometry_radial_bound
 
 contains
 
-   !> Cube-map cell (1..6 n^2) of a non-zero vector v.
+   !> Cube-map cell (1..6 n^2) of a non-zero vector v (`cube_cell`).
    pure integer function radial_cell(n, v) result(c)
       !> Cells per face edge.
       integer, intent(in) :: n
       !> Direction (any length > 0).
       real(wp), intent(in) :: v(3)
-      integer :: ax, f, ia, ib, a1, a2
-      real(wp) :: m
-      ax = 1
-      if (abs(v(2)) > abs(v(ax))) ax = 2
-      if (abs(v(3)) > abs(v(ax))) ax = 3
-      m = abs(v(ax))
-      f = 2 * (ax - 1) + merge(1, 2, v(ax) >= 0.0_wp)
-      a1 = 1 + mod(ax, 3)
-      a2 = 1 + mod(ax + 1, 3)
-      ia = min(n - 1, max(0, int((v(a1) / m + 1.0_wp) * (0.5_wp * n))))
-      ib = min(n - 1, max(0, int((v(a2) / m + 1.0_wp) * (0.5_wp * n))))
-      c = 1 + ia + n * (ib + n * (f - 1))
+      c = cube_cell(n, v)
    end function radial_cell
 
    !> True when the point p (|p| = len > 0) is certainly outside the surface: len exceeds its
@@ -56,6 +45,8 @@ contains
       real(wp), intent(in) :: p(3), len
       surely_outside = .false.
       if (rb%n == 0 .or. len <= 0.0_wp) return
-      surely_outside = len > rb%rmax(radial_cell(rb%n, p)) * (1.0_wp + 1.0e-12_wp)
+      surely_outside = len > rb%rmax(cube_cell(rb%n, p)) * (1.0_wp + 1.0e-12_wp)
    end function surely_outside
+
+   include "anm_cube_cell.inc"
 end module anm_geometry_radial_bound
