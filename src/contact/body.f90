@@ -273,6 +273,7 @@ contains
                                dcr(:), obb_c(:, :), obb_e(:, :, :), obb_h(:, :), trig(:, :), bv(:, :, :), w(:, :)
       integer :: ntg, npg, nleaf_t, nleaf_p, i, j, l, k, n, np_tot, kc, nd, ip, i0, nr
       real(wp) :: dth, dph, smin, smax, ms, dmax, mm, smx, hi, lo, margin, rbound
+      logical :: with_table
 
       if (present(nused)) then
          body%shape = sh_truncate(shape, nused)
@@ -397,11 +398,9 @@ contains
          return
       end if
       call fill_nodes(body, obb_c, obb_e, obb_h)
-      if (.not. present(table)) then
-         call support_table(body)
-      else if (table) then
-         call support_table(body)
-      end if
+      with_table = .true.
+      if (present(table)) with_table = table
+      if (with_table) call support_table(body)
       call guaranteed_box(body)
       call extent_scan(body%shape, body%next, body%ext_lo, body%ext_hi)
    end subroutine new_contact_body

@@ -347,16 +347,18 @@ contains
       logical :: force
       force = .false.
       if (present(now)) force = now
-      todo = pack([(k, k=1, size(kinds))], self%built)
+      ! counted without allocating: this runs after every batch
       n = 0
-      do i = 1, size(todo)
-         if (needs_table(kinds(todo(i))%body)) n = n + 1
-         if (allocated(kinds(todo(i))%shell_body)) then
-            if (needs_table(kinds(todo(i))%shell_body)) n = n + 1
+      do k = 1, size(kinds)
+         if (.not. self%built(k)) cycle
+         if (needs_table(kinds(k)%body)) n = n + 1
+         if (allocated(kinds(k)%shell_body)) then
+            if (needs_table(kinds(k)%shell_body)) n = n + 1
          end if
       end do
       if (n == 0) return
       if (.not. force .and. attempts - self%attempts_tabled < int(attempts_per_table, int64) * n) return
+      todo = pack([(k, k=1, size(kinds))], self%built)
       !$omp parallel do default(none) shared(kinds, todo) private(i) schedule(dynamic)
       do i = 1, size(todo)
          call add_support_table(kinds(todo(i))%body)
