@@ -15,7 +15,7 @@ module test_contact
    use anm_contact_body, only: contact_body_type, new_contact_body, leaf_level, stored_level, patch_rows, &
       & patch_cols, patch_index, patch_geometry, patch_bounds, slope_bound, nd_c, nd_e, nd_h, nd_r, nd_rc, nd_dir, &
       & support_bound, support_cell
-   use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_depth, &
+   use anm_contact_overlap, only: contact_method, contact_params_type, bodies_overlap, overlap_early, overlap_depth, &
       & body_crosses_walls, sector_range, boxes_disjoint
    use anm_contact_studies, only: thesis_overlap_depth
    use anm_testing, only: unittest_type, new_unittest, check, shapes_dir
@@ -45,6 +45,8 @@ contains
               new_unittest("box separation test against plain projections", test_boxes_disjoint), &
               new_unittest("support tables bound the support function and are tight", test_support_table), &
               new_unittest("support-table stages decide as the test without them", test_support_stages), &
+              new_unittest("first stages alone prove only true overlaps (Perram-Wertheim, real shapes)", &
+                           test_early_stages), &
               new_unittest("certified gap resolution on sphere and ellipsoid pairs", test_certified_gap), &
               new_unittest("spheres: exact decision to 1e-9 of tangency", test_spheres), &
               new_unittest("ellipsoids agree with Perram-Wertheim", test_ellipsoids), &
@@ -749,6 +751,104 @@ contains
       if (allocated(error)) return
       call check(error, nfp_cert <= ntested / 10, "certified false positives above 10%")
    end subroutine test_ellipsoids
+
+   !> `overlap_early` (the first stages alone, which `packing%fits` runs over every candidate
+   !> before it certifies any pair) against exact truth: ellipsoid pairs it calls overlapping
+   !> overlap by Perram-Wertheim (outside a 1 % band around tangency, the expansion's error), and
+   !> every pair it calls overlapping, of ellipsoids and of real shapes with support tables
+   !> (stage 2b), is overlapping for `bodies_overlap` in both modes. It must also decide: at least
+   !> half of the ellipsoid pairs closer than 0.9 of contact.
+   subroutine test_early_stages(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: nell = 3, nshape = 3
+      real(wp), parameter :: axes(3, nell) = reshape([1.0_wp, 0.8_wp, 0.6_wp, 0.9_wp, 0.9_wp, 0.55_wp, &
+                                                       1.2_wp, 0.5_wp, 0.5_wp], [3, nell])
+      character(len=*), parameter :: files(nshape) = [character(len=48) :: &
+         "/MA107-6-fine/MA107-6-fine-anm-00002.dat", "/MA107-6-fine/MA107-6-fine-anm-00017.dat", &
+         "/MA111-7-coarse/MA111-7-coarse-anm-00009.dat"]
+      character(len=:), allocatable :: dir
+      type(contact_body_type) :: body(nell), real_body(nshape)
+      type(sh_expansion_type) :: shape
+      type(contact_params_type) :: par, cert
+      type(rng_type) :: rng
+      real(wp) :: rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), dstar, delta, sa, sb, lo, hi
+      integer :: k, n, ia, ib, nfalse, nbeyond, ndeep, nproved, nreal
+      logical :: early
+      cert%certified = .true.
+      do k = 1, nell
+         call new_contact_body(body(k), ellipsoid_shape(axes(1, k), axes(2, k), axes(3, k), ell_order), error)
+         if (allocated(error)) return
+      end do
+      call new_rng(rng, 17_i8, 4_i8)
+      nfalse = 0
+      nbeyond = 0
+      ndeep = 0
+      nproved = 0
+      ca = 0.0_wp
+      do n = 1, 6000
+         ia = 1 + mod(n, nell)
+         ib = 1 + mod(n / nell, nell)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         dstar = 1.0_wp / sqrt(pw_function(rota, axes(:, ia), rotb, axes(:, ib), u))
+         delta = 0.7_wp * rng%uniform() - 0.5_wp
+         cb = ca + dstar * (1.0_wp + delta) * u
+         early = overlap_early(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, cert)
+         if (early .and. delta > ell_band) nfalse = nfalse + 1
+         if (early) then
+            if (.not. (bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, cert) .and. &
+                       bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, par))) &
+               nbeyond = nbeyond + 1
+         end if
+         if (delta < -0.1_wp) then
+            ndeep = ndeep + 1
+            if (early) nproved = nproved + 1
+         end if
+      end do
+      write (output_unit, '(4x,a,i0,a,i0,a,i0,a,i0)') "ellipsoids: 6000 pairs, closer than 0.9 of contact ", &
+         ndeep, ", proved by the first stages ", nproved, ", false proofs ", nfalse, ", not confirmed ", nbeyond
+      call check(error, nfalse + nbeyond, 0, "first-stage overlaps that are not overlaps (ellipsoids)")
+      if (allocated(error)) return
+      call check(error, 2 * nproved >= ndeep, "first stages proved only "//to_string(nproved)//" of " &
+                 //to_string(ndeep)//" deep ellipsoid overlaps")
+      if (allocated(error)) return
+      ! real shapes with support tables: stage 2b takes part
+      call shapes_dir(dir, error)
+      if (allocated(error)) return
+      do k = 1, nshape
+         call load_shape_file(dir//trim(files(k)), shape, error)
+         if (allocated(error)) return
+         call new_contact_body(real_body(k), shape, error, nused=10)
+         if (allocated(error)) return
+      end do
+      nbeyond = 0
+      nreal = 0
+      do n = 1, 3000
+         ia = 1 + mod(n, nshape)
+         ib = 1 + mod(n / nshape, nshape)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         sa = 0.5_wp + rng%uniform()
+         sb = 0.5_wp + rng%uniform()
+         lo = sa * real_body(ia)%r_min + sb * real_body(ib)%r_min
+         hi = sa * real_body(ia)%r_max + sb * real_body(ib)%r_max
+         cb = (lo + (hi - lo) * rng%uniform()) * u
+         if (overlap_early(real_body(ia), ca, rota, sa, real_body(ib), cb, rotb, sb, cert)) then
+            nreal = nreal + 1
+            if (.not. bodies_overlap(real_body(ia), ca, rota, sa, real_body(ib), cb, rotb, sb, cert)) &
+               nbeyond = nbeyond + 1
+         end if
+      end do
+      write (output_unit, '(4x,a,i0,a,i0)') "real shapes: 3000 pairs between the inscribed and bounding spheres, "// &
+         "proved by the first stages ", nreal, ", not confirmed ", nbeyond
+      call check(error, nbeyond, 0, "first-stage overlaps that the full test denies (real shapes)")
+      if (allocated(error)) return
+      call check(error, nreal > 300, "first stages proved only "//to_string(nreal)//" real-shape overlaps")
+   end subroutine test_early_stages
 
    !> Dense reference: body-frame surface points of a shape on a (nt x 2nt) grid.
    subroutine dense_points(shape, nt, pts)

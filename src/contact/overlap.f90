@@ -47,7 +47,7 @@ module anm_contact_overlap
    implicit none
    private
 
-   public :: contact_method, contact_params_type, bodies_overlap, overlap_depth, body_crosses_walls, &
+   public :: contact_method, contact_params_type, bodies_overlap, overlap_early, overlap_depth, body_crosses_walls, &
       & point_inside, sector_range, boxes_disjoint, cap_bounds, cap_outside, cap_inside
 
    !> Contact methods.
@@ -143,7 +143,104 @@ module anm_contact_overlap
    !> Finest patch level of the wall test (pi/1024 rad; levels beyond stored_level use local bounds).
    integer, parameter :: wall_level = stored_level + 2
 
+
+   !> Outcomes of the first stages (`early_stages`).
+   integer, parameter :: early_open = 0, early_overlap = 1, early_disjoint = 2
+
+   !> What the first stages decided, and the gap tolerance of the later ones (mm).
+   type :: early_type
+      integer :: status = early_open
+      real(wp) :: tol = 0.0_wp
+   end type early_type
 contains
+
+   !> True when the first stages of `bodies_overlap` alone prove that the two posed bodies
+   !> overlap (bounding and inscribed spheres, the surface points on the line of centres, the
+   !> furthest-reaching points of the support tables): a few radius evaluations, no descent. When
+   !> it is true, `bodies_overlap` is true; when it is false, nothing is known. A candidate tested
+   !> against several bodies can look for such an overlap among all of them before it certifies
+   !> any pair near contact (`packing%fits`).
+   pure logical function overlap_early(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
+                                       params) result(hit)
+      !> First body.
+      type(contact_body_type), intent(in) :: body_a
+      !> Its centre (world, mm).
+      real(wp), intent(in) :: center_a(3)
+      !> Its rotation, body to world.
+      real(wp), intent(in) :: rot_a(3, 3)
+      !> Its scale (mm per shape unit).
+      real(wp), intent(in) :: scale_a
+      !> Second body.
+      type(contact_body_type), intent(in) :: body_b
+      !> Its centre.
+      real(wp), intent(in) :: center_b(3)
+      !> Its rotation.
+      real(wp), intent(in) :: rot_b(3, 3)
+      !> Its scale.
+      real(wp), intent(in) :: scale_b
+      !> Parameters.
+      type(contact_params_type), intent(in) :: params
+      type(early_type) :: e
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+      hit = e%status == early_overlap
+   end function overlap_early
+
+   !> Stages 1 to 2b of `bodies_overlap` (with the Newton-Raphson method stage 1 only): e%status
+   !> says whether they decide the pair; e%tol is the gap tolerance of the later stages.
+   pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+      type(contact_body_type), intent(in) :: body_a, body_b
+      real(wp), intent(in) :: center_a(3), rot_a(3, 3), scale_a, center_b(3), rot_b(3, 3), scale_b
+      type(contact_params_type), intent(in) :: params
+      type(early_type), intent(out) :: e
+      real(wp) :: dvec(3), dist, u(3), ra, rb, va(3), vb(3)
+      integer :: ka, kb
+      logical :: tables
+      dvec = center_b - center_a
+      dist = sqrt(sum(dvec**2))
+      ! stage 1: bounding and inscribed spheres
+      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max) then
+         e%status = early_disjoint
+         return
+      end if
+      if (dist < scale_a * body_a%r_min + scale_b * body_b%r_min) then
+         e%status = early_overlap
+         return
+      end if
+      if (params%method == contact_method%newton_raphson) return
+      u = dvec / dist
+      va = matmul(u, rot_a)
+      vb = -matmul(u, rot_b)
+      e%tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
+                               scale_b * maxval(body_b%box_hi - body_b%box_lo))
+      ! stage 1b: support functions along the line of centres (certified tables): a plane normal
+      ! to u separates the bodies by more than the gap tolerance, so no later stage could report
+      ! contact (certified mode reports gaps below tol)
+      tables = allocated(body_a%supp) .and. allocated(body_b%supp)
+      if (tables) then
+         ka = support_cell(va)
+         kb = support_cell(vb)
+         if (scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb) + e%tol < dist) then
+            e%status = early_disjoint
+            return
+         end if
+      end if
+      ! stage 2: line of centres
+      ra = scale_a * body_a%shape%radius_dir(va)
+      rb = scale_b * body_b%shape%radius_dir(vb)
+      if (ra + rb > dist) then
+         e%status = early_overlap
+         return
+      end if
+      ! stage 2b (certified mode, which reports every true overlap): the surface points of A and of
+      ! B that reach furthest towards the other body (support tables), each tested against the
+      ! other body along the ray to its centre
+      if (params%certified .and. tables) then
+         if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b) .or. &
+             reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)) then
+            e%status = early_overlap
+         end if
+      end if
+   end subroutine early_stages
 
    !> True when the two posed bodies overlap (thread-safe, no allocation).
    pure logical function bodies_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
@@ -166,59 +263,27 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
-      real(wp) :: dvec(3), dist, u(3), ra, rb, eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol, va(3), vb(3)
+      real(wp) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
       type(pose_type) :: pab, pba
-      logical :: found, certain, tables
+      logical :: found, certain
       type(probe_type) :: pr
-      integer :: status, ka, kb
+      type(early_type) :: e
+      integer :: status
 
-      dvec = center_b - center_a
-      dist = sqrt(sum(dvec**2))
-      ! stage 1: bounding and inscribed spheres
-      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max) then
-         hit = .false.
-         return
-      end if
-      if (dist < scale_a * body_a%r_min + scale_b * body_b%r_min) then
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+      select case (e%status)
+      case (early_overlap)
          hit = .true.
          return
-      end if
+      case (early_disjoint)
+         hit = .false.
+         return
+      end select
       if (params%method == contact_method%newton_raphson) then
          hit = nr_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params)
          return
       end if
-      u = dvec / dist
-      va = matmul(u, rot_a)
-      vb = -matmul(u, rot_b)
-      tol = params%gap * min(scale_a * maxval(body_a%box_hi - body_a%box_lo), &
-                             scale_b * maxval(body_b%box_hi - body_b%box_lo))
-      ! stage 1b: support functions along the line of centres (certified tables): a plane normal
-      ! to u separates the bodies by more than the gap tolerance, so no later stage could report
-      ! contact (certified mode reports gaps below tol)
-      tables = allocated(body_a%supp) .and. allocated(body_b%supp)
-      if (tables) then
-         ka = support_cell(va)
-         kb = support_cell(vb)
-         if (scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb) + tol < dist) then
-            hit = .false.
-            return
-         end if
-      end if
-      ! stage 2: line of centres
-      ra = scale_a * body_a%shape%radius_dir(va)
-      rb = scale_b * body_b%shape%radius_dir(vb)
-      if (ra + rb > dist) then
-         hit = .true.
-         return
-      end if
-      ! stage 2b (certified mode, which reports every true overlap): the surface points of A and of
-      ! B that reach furthest towards the other body (support tables), each tested against the
-      ! other body along the ray to its centre
-      if (params%certified .and. tables) then
-         hit = reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b)
-         if (.not. hit) hit = reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)
-         if (hit) return
-      end if
+      tol = e%tol
       ! stage 3: extent boxes and the EOB
       call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params%certified, &
                    eob_lo, eob_hi)

@@ -26,7 +26,7 @@
 !>     call pk%neighbours(x, rho, ids, shifts, n)
 module anm_parking_packing
    use anm_core_kinds, only: wp
-   use anm_contact_overlap, only: contact_params_type, bodies_overlap, body_crosses_walls
+   use anm_contact_overlap, only: contact_params_type, bodies_overlap, overlap_early, body_crosses_walls
    use anm_config_shells, only: shell_mode
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_parking_kinds, only: particle_kind_type
@@ -469,6 +469,11 @@ contains
          end if
          call live_candidates(self, scratch%cand, scratch%shift, ncand)
          call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order, sorted)
+         ! an overlap the first stages prove, with any candidate, before any pair near contact is
+         ! certified (the answer is the same: the full test would report that overlap too)
+         if (ncand >= 2) then
+            if (early_hit(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip)) return
+         end if
          do ii = 1, ncand
             i = ii
             if (sorted) i = order(ii)
@@ -491,6 +496,43 @@ contains
       end associate
       ok = .true.
    end function fits
+
+   !> Whether the first stages of the contact test (`overlap_early`) prove that the candidate
+   !> (kind kq at x, rr, sc) overlaps one of the ncand candidates in scratch, in the order of
+   !> `likely_first`, with the bodies the shell mode tests.
+   pure logical function early_hit(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip) result(hit)
+      type(packing_type), intent(in) :: self
+      type(particle_kind_type), intent(in) :: kq
+      real(wp), intent(in) :: x(3), rr(3, 3), sc
+      type(fit_scratch_type), intent(in) :: scratch
+      integer, intent(in) :: ncand, order(:), jskip
+      logical, intent(in) :: sorted
+      integer :: ii, i, j
+      real(wp) :: xj(3)
+      hit = .true.
+      associate (p => self%p)
+         do ii = 1, ncand
+            i = ii
+            if (sorted) i = order(ii)
+            j = scratch%cand(i)
+            if (j == jskip) then
+               if (all(scratch%shift(:, i) == 0.0_wp)) cycle
+            end if
+            xj = self%center(:, j) + scratch%shift(:, i)
+            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
+               if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
+                  if (overlap_early(kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+               else if (p%mode == shell_mode%exclude) then
+                  if (overlap_early(kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+               else
+                  if (overlap_early(kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (overlap_early(kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+               end if
+            end associate
+         end do
+      end associate
+      hit = .false.
+   end function early_hit
 
    !> Candidate records to particle ids, retired records dropped (order kept).
    pure subroutine live_candidates(self, cnd, shf, ncand)
