@@ -26,6 +26,7 @@
 !>     call pk%neighbours(x, rho, ids, shifts, n)
 module anm_parking_packing
    use anm_core_kinds, only: wp
+   use anm_contact_body, only: contact_body_type
    use anm_contact_overlap, only: contact_params_type, bodies_overlap, overlap_early, body_crosses_walls
    use anm_config_shells, only: shell_mode
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
@@ -442,8 +443,7 @@ contains
       integer, intent(in), optional :: since
       !> Particle to skip (default: none).
       integer, intent(in), optional :: exclude
-      integer :: i, j, ncand, ii, jmin, jskip
-      real(wp) :: xj(3)
+      integer :: ncand, jmin, jskip
       logical :: hit, sorted
       integer :: order(max_sorted)
       ok = .false.
@@ -472,41 +472,24 @@ contains
          ! an overlap the first stages prove, with any candidate, before any pair near contact is
          ! certified (the answer is the same: the full test would report that overlap too)
          if (ncand >= 2) then
-            if (early_hit(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip)) return
+            if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.true.)) return
          end if
-         do ii = 1, ncand
-            i = ii
-            if (sorted) i = order(ii)
-            j = scratch%cand(i)
-            if (j == jskip) then
-               if (all(scratch%shift(:, i) == 0.0_wp)) cycle
-            end if
-            xj = self%center(:, j) + scratch%shift(:, i)
-            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
-               if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (bodies_overlap(kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
-               else if (p%mode == shell_mode%exclude) then
-                  if (bodies_overlap(kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
-               else
-                  if (bodies_overlap(kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
-                  if (bodies_overlap(kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
-               end if
-            end associate
-         end do
+         if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false.)) return
       end associate
       ok = .true.
    end function fits
 
-   !> Whether the first stages of the contact test (`overlap_early`) prove that the candidate
-   !> (kind kq at x, rr, sc) overlaps one of the ncand candidates in scratch, in the order of
-   !> `likely_first`, with the bodies the shell mode tests.
-   pure logical function early_hit(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip) result(hit)
+   !> Whether the candidate (kind kq at x, rr, sc) overlaps one of the ncand candidates in
+   !> scratch (in the order of `likely_first`; jskip's own record skipped), with the bodies the
+   !> shell mode tests: by the full contact test, or (early) by its first stages alone
+   !> (`overlap_early`: true only where the full test is true; false says nothing).
+   pure logical function any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early) result(hit)
       type(packing_type), intent(in) :: self
       type(particle_kind_type), intent(in) :: kq
       real(wp), intent(in) :: x(3), rr(3, 3), sc
       type(fit_scratch_type), intent(in) :: scratch
       integer, intent(in) :: ncand, order(:), jskip
-      logical, intent(in) :: sorted
+      logical, intent(in) :: sorted, early
       integer :: ii, i, j
       real(wp) :: xj(3)
       hit = .true.
@@ -521,18 +504,31 @@ contains
             xj = self%center(:, j) + scratch%shift(:, i)
             associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
                if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (overlap_early(kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
                else if (p%mode == shell_mode%exclude) then
-                  if (overlap_early(kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
                else
-                  if (overlap_early(kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
-                  if (overlap_early(kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
                end if
             end associate
          end do
       end associate
       hit = .false.
-   end function early_hit
+   end function any_overlap
+
+   !> `bodies_overlap`, or with early `overlap_early`, of two posed bodies.
+   pure logical function pair_overlap(early, a, xa, ra, sa, b, xb, rb, sb, params) result(hit)
+      logical, intent(in) :: early
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: xa(3), ra(3, 3), sa, xb(3), rb(3, 3), sb
+      type(contact_params_type), intent(in) :: params
+      if (early) then
+         hit = overlap_early(a, xa, ra, sa, b, xb, rb, sb, params)
+      else
+         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params)
+      end if
+   end function pair_overlap
 
    !> Candidate records to particle ids, retired records dropped (order kept).
    pure subroutine live_candidates(self, cnd, shf, ncand)
