@@ -146,6 +146,8 @@ module anm_contact_overlap
 
    !> Outcomes of the first stages (`early_stages`).
    integer, parameter :: early_open = 0, early_overlap = 1, early_disjoint = 2
+   !> Steps of the separating-plane search of stage 2c.
+   integer, parameter :: plane_steps = 6
 
    !> What the first stages decided, and the gap tolerance of the later ones (mm).
    type :: early_type
@@ -181,16 +183,20 @@ contains
       !> Parameters.
       type(contact_params_type), intent(in) :: params
       type(early_type) :: e
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .false., e)
       hit = e%status == early_overlap
    end function overlap_early
 
-   !> Stages 1 to 2b of `bodies_overlap` (with the Newton-Raphson method stage 1 only): e%status
-   !> says whether they decide the pair; e%tol is the gap tolerance of the later stages.
-   pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+   !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2c only
+   !> with `planes`): e%status says whether they decide the pair; e%tol is the gap tolerance of
+   !> the later stages.
+   pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, planes, &
+                                e)
       type(contact_body_type), intent(in) :: body_a, body_b
       real(wp), intent(in) :: center_a(3), rot_a(3, 3), scale_a, center_b(3), rot_b(3, 3), scale_b
       type(contact_params_type), intent(in) :: params
+      !> Whether to search separating planes off the line of centres (stage 2c).
+      logical, intent(in) :: planes
       type(early_type), intent(out) :: e
       real(wp) :: dvec(3), dist, u(3), ra, rb, va(3), vb(3)
       integer :: ka, kb
@@ -238,9 +244,62 @@ contains
          if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b) .or. &
              reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)) then
             e%status = early_overlap
+            return
          end if
       end if
+      ! stage 2c: separating planes of other normals than the line of centres (support tables)
+      if (planes .and. tables) then
+         if (plane_found(body_a, rot_a, scale_a, body_b, rot_b, scale_b, dvec, u, ka, kb, e%tol)) &
+            e%status = early_disjoint
+      end if
    end subroutine early_stages
+
+   !> Stage 2c: a plane that separates the bodies by more than tol, searched from the line of
+   !> centres (unit u, the cells ka and kb of stage 1b) by `plane_steps` steps of projected gradient
+   !> ascent of the tables' separation bound s(n) = n . d - s_A h_A(n) - s_B h_B(-n) (d the centre
+   !> vector, h the tables' certified bounds of the support functions). Its gradient is about the
+   !> difference of the two support points (the cells' stored points); the step starts at 1/|d|,
+   !> grows by half after a better normal and halves after a worse one. A plane found separates
+   !> the convex hulls, hence the bodies, by more than tol: "no contact" is then what every later
+   !> stage answers (certified mode reports contact only for gaps below tol). Non-convex bodies
+   !> whose hulls meet are left to the later stages.
+   pure logical function plane_found(a, ra, sa, b, rb, sb, dvec, u, ka, kb, tol) result(found)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ra(3, 3), sa, rb(3, 3), sb, dvec(3), u(3), tol
+      integer, intent(in) :: ka, kb
+      real(wp) :: n(3), nt(3), g(3), pa(3), pb(3), va(3), vb(3), best, s, alpha
+      integer :: i, ca, cb
+      found = .true.
+      n = u
+      va = matmul(n, ra)
+      vb = -matmul(n, rb)
+      best = dot_product(n, dvec) - sa * support_bound(a, va, ka) - sb * support_bound(b, vb, kb)
+      pa = sa * matmul(ra, real(a%supp(1:3, ka), wp))
+      pb = dvec + sb * matmul(rb, real(b%supp(1:3, kb), wp))
+      alpha = 1.0_wp / norm2(dvec)
+      do i = 1, plane_steps
+         g = pb - pa
+         g = g - dot_product(g, n) * n
+         nt = n + alpha * g
+         nt = nt / norm2(nt)
+         va = matmul(nt, ra)
+         vb = -matmul(nt, rb)
+         ca = support_cell(va)
+         cb = support_cell(vb)
+         s = dot_product(nt, dvec) - sa * support_bound(a, va, ca) - sb * support_bound(b, vb, cb)
+         if (s > tol) return
+         if (s > best) then
+            n = nt
+            best = s
+            pa = sa * matmul(ra, real(a%supp(1:3, ca), wp))
+            pb = dvec + sb * matmul(rb, real(b%supp(1:3, cb), wp))
+            alpha = 1.5_wp * alpha
+         else
+            alpha = 0.5_wp * alpha
+         end if
+      end do
+      found = .false.
+   end function plane_found
 
    !> True when the two posed bodies overlap (thread-safe, no allocation).
    pure logical function bodies_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
@@ -270,7 +329,7 @@ contains
       type(early_type) :: e
       integer :: status
 
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, e)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., e)
       select case (e%status)
       case (early_overlap)
          hit = .true.
