@@ -183,18 +183,20 @@ contains
       !> Parameters.
       type(contact_params_type), intent(in) :: params
       type(early_type) :: e
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .false., e)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., e)
       hit = e%status == early_overlap
    end function overlap_early
 
-   !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2c only
-   !> with `planes`): e%status says whether they decide the pair; e%tol is the gap tolerance of
-   !> the later stages.
-   pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, planes, &
-                                e)
+   !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2 and 2b
+   !> only with `proofs`, 2c only with `planes`): e%status says whether they decide the pair;
+   !> e%tol is the gap tolerance of the later stages.
+   pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, &
+                                planes, e)
       type(contact_body_type), intent(in) :: body_a, body_b
       real(wp), intent(in) :: center_a(3), rot_a(3, 3), scale_a, center_b(3), rot_b(3, 3), scale_b
       type(contact_params_type), intent(in) :: params
+      !> Whether to run the overlap proofs of stages 2 and 2b (false: the caller ran them already).
+      logical, intent(in) :: proofs
       !> Whether to search separating planes off the line of centres (stage 2c).
       logical, intent(in) :: planes
       type(early_type), intent(out) :: e
@@ -230,21 +232,23 @@ contains
             return
          end if
       end if
-      ! stage 2: line of centres
-      ra = scale_a * body_a%shape%radius_dir(va)
-      rb = scale_b * body_b%shape%radius_dir(vb)
-      if (ra + rb > dist) then
-         e%status = early_overlap
-         return
-      end if
-      ! stage 2b (certified mode, which reports every true overlap): the surface points of A and of
-      ! B that reach furthest towards the other body (support tables), each tested against the
-      ! other body along the ray to its centre
-      if (params%certified .and. tables) then
-         if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b) .or. &
-             reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)) then
+      if (proofs) then
+         ! stage 2: line of centres
+         ra = scale_a * body_a%shape%radius_dir(va)
+         rb = scale_b * body_b%shape%radius_dir(vb)
+         if (ra + rb > dist) then
             e%status = early_overlap
             return
+         end if
+         ! stage 2b (certified mode, which reports every true overlap): the surface points of A and
+         ! of B that reach furthest towards the other body (support tables), each tested against
+         ! the other body along the ray to its centre
+         if (params%certified .and. tables) then
+            if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b) .or. &
+                reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)) then
+               e%status = early_overlap
+               return
+            end if
          end if
       end if
       ! stage 2c: separating planes of other normals than the line of centres (support tables)
@@ -303,7 +307,7 @@ contains
 
    !> True when the two posed bodies overlap (thread-safe, no allocation).
    pure logical function bodies_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
-                                        params) result(hit)
+                                        params, proofs_done) result(hit)
       !> First body.
       type(contact_body_type), intent(in) :: body_a
       !> Its centre (world, mm).
@@ -322,14 +326,20 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
+      !> The caller ran `overlap_early` on this very pair and it proved no overlap: its overlap
+      !> proofs (line of centres, support reach) are not evaluated again (default false).
+      logical, intent(in), optional :: proofs_done
       real(wp) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
+      logical :: proofs
       type(pose_type) :: pab, pba
       logical :: found, certain
       type(probe_type) :: pr
       type(early_type) :: e
       integer :: status
 
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., e)
+      proofs = .true.
+      if (present(proofs_done)) proofs = .not. proofs_done
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, .true., e)
       select case (e%status)
       case (early_overlap)
          hit = .true.

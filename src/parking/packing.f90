@@ -474,7 +474,9 @@ contains
          if (ncand >= 2) then
             if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.true.)) return
          end if
-         if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false.)) return
+         ! the full tests (without the proofs just run, when they were)
+         if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false., &
+                         proofs_done=ncand >= 2)) return
       end associate
       ok = .true.
    end function fits
@@ -482,16 +484,22 @@ contains
    !> Whether the candidate (kind kq at x, rr, sc) overlaps one of the ncand candidates in
    !> scratch (in the order of `likely_first`; jskip's own record skipped), with the bodies the
    !> shell mode tests: by the full contact test, or (early) by its first stages alone
-   !> (`overlap_early`: true only where the full test is true; false says nothing).
-   pure logical function any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early) result(hit)
+   !> (`overlap_early`: true only where the full test is true; false says nothing). With
+   !> proofs_done the full tests skip the early overlap proofs (the caller ran them on these pairs).
+   pure logical function any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, proofs_done) &
+      result(hit)
       type(packing_type), intent(in) :: self
       type(particle_kind_type), intent(in) :: kq
       real(wp), intent(in) :: x(3), rr(3, 3), sc
       type(fit_scratch_type), intent(in) :: scratch
       integer, intent(in) :: ncand, order(:), jskip
       logical, intent(in) :: sorted, early
+      logical, intent(in), optional :: proofs_done
       integer :: ii, i, j
       real(wp) :: xj(3)
+      logical :: done
+      done = .false.
+      if (present(proofs_done)) done = proofs_done
       hit = .true.
       associate (p => self%p)
          do ii = 1, ncand
@@ -504,12 +512,12 @@ contains
             xj = self%center(:, j) + scratch%shift(:, i)
             associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
                if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (pair_overlap(early, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
                else if (p%mode == shell_mode%exclude) then
-                  if (pair_overlap(early, kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, done, kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
                else
-                  if (pair_overlap(early, kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
-                  if (pair_overlap(early, kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, done, kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
                end if
             end associate
          end do
@@ -517,16 +525,16 @@ contains
       hit = .false.
    end function any_overlap
 
-   !> `bodies_overlap`, or with early `overlap_early`, of two posed bodies.
-   pure logical function pair_overlap(early, a, xa, ra, sa, b, xb, rb, sb, params) result(hit)
-      logical, intent(in) :: early
+   !> `bodies_overlap` (proofs_done passed on), or with early `overlap_early`, of two posed bodies.
+   pure logical function pair_overlap(early, done, a, xa, ra, sa, b, xb, rb, sb, params) result(hit)
+      logical, intent(in) :: early, done
       type(contact_body_type), intent(in) :: a, b
       real(wp), intent(in) :: xa(3), ra(3, 3), sa, xb(3), rb(3, 3), sb
       type(contact_params_type), intent(in) :: params
       if (early) then
          hit = overlap_early(a, xa, ra, sa, b, xb, rb, sb, params)
       else
-         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params)
+         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params, proofs_done=done)
       end if
    end function pair_overlap
 
