@@ -200,7 +200,7 @@ contains
       !> Whether to search separating planes off the line of centres (stage 2c).
       logical, intent(in) :: planes
       type(early_type), intent(out) :: e
-      real(wp) :: dvec(3), dist, u(3), ra, rb, va(3), vb(3)
+      real(wp) :: dvec(3), dist, u(3), ra, rb, va(3), vb(3), hsum
       integer :: ka, kb
       logical :: tables
       dvec = center_b - center_a
@@ -227,7 +227,8 @@ contains
       if (tables) then
          ka = support_cell(va)
          kb = support_cell(vb)
-         if (scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb) + e%tol < dist) then
+         hsum = scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb)
+         if (hsum + e%tol < dist) then
             e%status = early_disjoint
             return
          end if
@@ -253,31 +254,30 @@ contains
       end if
       ! stage 2c: separating planes of other normals than the line of centres (support tables)
       if (planes .and. tables) then
-         if (plane_found(body_a, rot_a, scale_a, body_b, rot_b, scale_b, dvec, u, ka, kb, e%tol)) &
+         if (plane_found(body_a, rot_a, scale_a, body_b, rot_b, scale_b, dvec, u, ka, kb, dist - hsum, e%tol)) &
             e%status = early_disjoint
       end if
    end subroutine early_stages
 
    !> Stage 2c: a plane that separates the bodies by more than tol, searched from the line of
-   !> centres (unit u, the cells ka and kb of stage 1b) by `plane_steps` steps of projected gradient
-   !> ascent of the tables' separation bound s(n) = n . d - s_A h_A(n) - s_B h_B(-n) (d the centre
-   !> vector, h the tables' certified bounds of the support functions). Its gradient is about the
+   !> centres (unit u, the cells ka and kb and the separation bound sep of stage 1b) by
+   !> `plane_steps` steps of projected gradient ascent of the tables' separation bound
+   !> s(n) = n . d - s_A h_A(n) - s_B h_B(-n) (d the centre vector, h the tables' certified bounds
+   !> of the support functions). Its gradient is about the
    !> difference of the two support points (the cells' stored points); the step starts at 1/|d|,
    !> grows by half after a better normal and halves after a worse one. A plane found separates
    !> the convex hulls, hence the bodies, by more than tol: "no contact" is then what every later
    !> stage answers (certified mode reports contact only for gaps below tol). Non-convex bodies
    !> whose hulls meet are left to the later stages.
-   pure logical function plane_found(a, ra, sa, b, rb, sb, dvec, u, ka, kb, tol) result(found)
+   pure logical function plane_found(a, ra, sa, b, rb, sb, dvec, u, ka, kb, sep, tol) result(found)
       type(contact_body_type), intent(in) :: a, b
-      real(wp), intent(in) :: ra(3, 3), sa, rb(3, 3), sb, dvec(3), u(3), tol
+      real(wp), intent(in) :: ra(3, 3), sa, rb(3, 3), sb, dvec(3), u(3), sep, tol
       integer, intent(in) :: ka, kb
       real(wp) :: n(3), nt(3), g(3), pa(3), pb(3), va(3), vb(3), best, s, alpha
       integer :: i, ca, cb
       found = .true.
       n = u
-      va = matmul(n, ra)
-      vb = -matmul(n, rb)
-      best = dot_product(n, dvec) - sa * support_bound(a, va, ka) - sb * support_bound(b, vb, kb)
+      best = sep
       pa = sa * matmul(ra, real(a%supp(1:3, ka), wp))
       pb = dvec + sb * matmul(rb, real(b%supp(1:3, kb), wp))
       alpha = 1.0_wp / norm2(dvec)
