@@ -54,7 +54,10 @@ contains
               new_unittest("walls against exact ellipsoid extents", test_walls), &
               new_unittest("Newton-Raphson baseline on spheres and ellipsoids", test_newton_raphson), &
               new_unittest("thesis' N_box reading: exact D_overlap of spheres, ellipsoids near the engine's", &
-                           test_thesis_nbox)]
+                           test_thesis_nbox), &
+              new_unittest("gap margin: spheres exact to 1e-9, sphere-ellipsoid exact distance", test_margin_exact), &
+              new_unittest("gap margin: real shapes against dense point distances", test_margin_real), &
+              new_unittest("gap margin against walls: exact ellipsoid extents", test_margin_walls)]
    end subroutine collect_contact
 
    !> The support table (`support_bound`) against the support function sampled on dense surface
@@ -922,6 +925,309 @@ contains
          depth = max(depth, (shape_b%radius_dir(y) - d) * sb)
       end do
    end function dense_depth
+
+   !> Distance test (`bodies_overlap` with a margin m: do the bodies come closer than m?) against
+   !> exact distances. Spheres: D = |c_b - c_a| - r_a - r_b, set to m +- 1e-9 and at random
+   !> around m; ellipsoid (order 24) and sphere: D = distance from the sphere's centre to the
+   !> ellipsoid (its closest point by the Lagrange condition, solved to rounding) minus the
+   !> radius. Every answer must be right outside the band [m - e, m + tol + e] (tol the certified
+   !> gap tolerance, e the expansion's error); `overlap_early` may only prove pairs closer than m.
+   subroutine test_margin_exact(error)
+      type(error_type), allocatable, intent(out) :: error
+      real(wp), parameter :: ax(3) = [1.0_wp, 0.7_wp, 0.45_wp]
+      type(contact_body_type) :: ba, bb, be
+      type(contact_params_type) :: par
+      type(rng_type) :: rng
+      real(wp) :: ra, rb, sa, sb, ca(3), cb(3), u(3), gap, rota(3, 3), rotb(3, 3), m, tol, dd, err, q(3)
+      integer :: n, nbad, nearly, nband, ntest
+      logical :: expect, got
+      type(sh_expansion_type) :: shape
+      call new_contact_body(ba, sphere_shape(1.0_wp), error)
+      if (allocated(error)) return
+      call new_contact_body(bb, sphere_shape(0.7_wp), error)
+      if (allocated(error)) return
+      par%certified = .true.
+      call new_rng(rng, 17_i8, 3_i8)
+      nbad = 0
+      nearly = 0
+      nband = 0
+      ntest = 0
+      do n = 1, 8000
+         sa = 0.5_wp + rng%uniform()
+         sb = 0.5_wp + 2.0_wp * rng%uniform()
+         ra = sa * 1.0_wp
+         rb = sb * 0.7_wp
+         m = (ra + rb) * (0.005_wp + 0.3_wp * rng%uniform())
+         tol = par%gap * min(2.0_wp * ra, 2.0_wp * rb)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         select case (mod(n, 4))
+         case (0)
+            gap = m + 1.0e-9_wp
+         case (1)
+            gap = m - 1.0e-9_wp
+         case default
+            gap = m + 2.0_wp * m * (2.0_wp * rng%uniform() - 1.0_wp)
+         end select
+         ca = [10.0_wp, 10.0_wp, 10.0_wp] + [rng%uniform(), rng%uniform(), rng%uniform()]
+         cb = ca + (ra + rb + gap) * u
+         gap = norm2(cb - ca) - ra - rb
+         got = bodies_overlap(ba, ca, rota, sa, bb, cb, rotb, sb, par, margin=m)
+         if (gap >= m .and. overlap_early(ba, ca, rota, sa, bb, cb, rotb, sb, par, margin=m)) nearly = nearly + 1
+         if (gap >= m .and. gap <= m + tol + 1.0e-12_wp) then
+            nband = nband + 1
+            cycle
+         end if
+         ntest = ntest + 1
+         if (got .neqv. gap < m) nbad = nbad + 1
+      end do
+      write (output_unit, '(a,i0,a,i0,a,i0)') "    spheres: tested ", ntest, ", in [m, m + tol] ", nband, &
+         ", wrong ", nbad
+      call check(error, nbad + nearly, 0, "wrong sphere decisions with a margin")
+      if (allocated(error)) return
+      ! ellipsoid (A) and sphere (B)
+      shape = ellipsoid_shape(ax(1), ax(2), ax(3), ell_order)
+      err = ellipsoid_error(shape, ax)
+      call new_contact_body(be, shape, error)
+      if (allocated(error)) return
+      nbad = 0
+      nband = 0
+      ntest = 0
+      ca = 0.0_wp
+      do n = 1, 6000
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         sb = 0.1_wp + 0.6_wp * rng%uniform()
+         rb = 0.7_wp * sb
+         m = 0.01_wp + 0.25_wp * rng%uniform()
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         ! centre of B at a random distance beyond the ellipsoid's surface point along u
+         q = ellipsoid_radius(ax(1), ax(2), ax(3), matmul(u, rota)) * u
+         cb = q + (rb + m * 2.0_wp * rng%uniform() + 0.3_wp * m * rng%normal()) * u
+         dd = ellipsoid_distance(ax, matmul(cb - ca, rota)) - rb
+         tol = par%gap * min(2.0_wp * ax(1), 2.0_wp * rb)
+         got = bodies_overlap(be, ca, rota, 1.0_wp, bb, cb, rotb, sb, par, margin=m)
+         if (dd >= m - err - 1.0e-9_wp .and. dd <= m + tol + err + 1.0e-9_wp) then
+            nband = nband + 1
+            cycle
+         end if
+         if (dd >= m .and. overlap_early(be, ca, rota, 1.0_wp, bb, cb, rotb, sb, par, margin=m)) nearly = nearly + 1
+         ntest = ntest + 1
+         if (got .neqv. dd < m) nbad = nbad + 1
+      end do
+      write (output_unit, '(a,es9.2,a,i0,a,i0,a,i0)') "    ellipsoid-sphere (expansion error ", err, "): tested ", &
+         ntest, ", in the band ", nband, ", wrong ", nbad
+      call check(error, ntest >= 5000, "fewer than 5000 ellipsoid-sphere pairs outside the band")
+      if (allocated(error)) return
+      call check(error, nbad + nearly, 0, "wrong ellipsoid-sphere decisions with a margin")
+   end subroutine test_margin_exact
+
+   !> Distance from the point q (ellipsoid frame, outside or inside) to the ellipsoid surface
+   !> x^2/a^2 + y^2/b^2 + z^2/c^2 = 1: for q outside, the closest point is a_i^2 q_i/(a_i^2 + t)
+   !> with t > 0 the root of sum (a_i q_i/(a_i^2 + t))^2 = 1 (bisection to rounding); negative
+   !> (minus a lower bound of the depth) for q inside.
+   pure function ellipsoid_distance(a, q) result(d)
+      real(wp), intent(in) :: a(3), q(3)
+      real(wp) :: d, lo, hi, t, x(3)
+      integer :: it
+      if (sum((q / a)**2) <= 1.0_wp) then
+         d = -1.0_wp
+         return
+      end if
+      lo = 0.0_wp
+      hi = maxval(a) * norm2(q) + maxval(a)**2
+      do it = 1, 200
+         t = 0.5_wp * (lo + hi)
+         if (sum((a * q / (a**2 + t))**2) > 1.0_wp) then
+            lo = t
+         else
+            hi = t
+         end if
+         if (hi - lo <= 1.0e-15_wp * hi) exit
+      end do
+      t = 0.5_wp * (lo + hi)
+      x = a**2 * q / (a**2 + t)
+      d = norm2(q - x)
+   end function ellipsoid_distance
+
+   !> Distance test on real shapes (MA111-7-coarse, order 14) near the margin, against dense
+   !> surface points of both bodies (60 x 120 directions each): their closest pair of points gives
+   !> an upper bound D_s of the distance, and D_s - h_a - h_b a lower bound (h the largest distance
+   !> from a surface point to the nearest sample, bounded with the certified Lipschitz constant).
+   !> "No" must never come with D_s < m; "yes" never with D_s - h_a - h_b > m + tol.
+   subroutine test_margin_real(error)
+      type(error_type), allocatable, intent(out) :: error
+      integer, parameter :: nshape = 3, npair = 90, nt = 60
+      character(len=5), parameter :: ids(nshape) = ["00002", "00035", "00061"]
+      character(len=:), allocatable :: dir
+      type(sh_expansion_type) :: shape
+      type(contact_body_type) :: body(nshape)
+      type(contact_params_type) :: par
+      type(rng_type) :: rng
+      type(real_pts_type), allocatable :: pts(:)
+      real(wp), allocatable :: xa(:, :), xb(:, :)
+      real(wp) :: rota(3, 3), rotb(3, 3), u(3), ca(3), cb(3), lo, hi, mid, m, ds, h(nshape), lmin, tol, d2
+      integer :: k, n, ia, ib, it, i, j, na, nb, nyes, nno, nwrong, nband
+      logical :: got
+      integer(i8) :: t0, t1, rate
+      real(wp) :: tsum
+      call shapes_dir(dir, error)
+      if (allocated(error)) return
+      allocate (pts(nshape))
+      do k = 1, nshape
+         call load_shape_file(dir//"/MA111-7-coarse/MA111-7-coarse-anm-"//ids(k)//".dat", shape, error)
+         if (allocated(error)) return
+         call new_contact_body(body(k), shape, error, nused=14)
+         if (allocated(error)) return
+         call dense_points(body(k)%shape, nt, pts(k)%p)
+         ! every direction is within pi/nt of a sample direction (grid cells of pi/nt): the
+         ! surface moves by at most r_max pi/nt sideways and lipschitz pi/nt radially
+         h(k) = (body(k)%r_max + body(k)%lipschitz) * pi / nt
+      end do
+      par%certified = .true.
+      call new_rng(rng, 23_i8, 5_i8)
+      nyes = 0
+      nno = 0
+      nwrong = 0
+      nband = 0
+      tsum = 0.0_wp
+      ca = 0.0_wp
+      do n = 1, npair
+         ia = 1 + mod(n, nshape)
+         ib = 1 + mod(n / nshape, nshape)
+         rota = random_rotation(rng)
+         rotb = random_rotation(rng)
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         lmin = min(maxval(body(ia)%box_hi - body(ia)%box_lo), maxval(body(ib)%box_hi - body(ib)%box_lo))
+         m = lmin * (0.01_wp + 0.06_wp * rng%uniform())
+         tol = par%gap * lmin
+         ! contact distance along u (certified test, bisection), then up to 2 m further
+         lo = body(ia)%r_min + body(ib)%r_min
+         hi = body(ia)%r_max + body(ib)%r_max
+         do it = 1, 40
+            mid = 0.5_wp * (lo + hi)
+            if (bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), mid * u, rotb, 1.0_wp, par)) then
+               lo = mid
+            else
+               hi = mid
+            end if
+         end do
+         cb = (hi + 2.0_wp * m * rng%uniform()) * u
+         call system_clock(t0, rate)
+         got = bodies_overlap(body(ia), ca, rota, 1.0_wp, body(ib), cb, rotb, 1.0_wp, par, margin=m)
+         call system_clock(t1)
+         tsum = tsum + real(t1 - t0, wp) / real(rate, wp)
+         ! dense points near the other body
+         xa = world_points(pts(ia)%p, rota, ca)
+         xb = world_points(pts(ib)%p, rotb, cb)
+         xa = pack_near(xa, cb, body(ib)%r_max + m + h(ia))
+         xb = pack_near(xb, ca, body(ia)%r_max + m + h(ib))
+         na = size(xa, 2)
+         nb = size(xb, 2)
+         d2 = huge(1.0_wp)
+         do j = 1, nb
+            do i = 1, na
+               d2 = min(d2, (xa(1, i) - xb(1, j))**2 + (xa(2, i) - xb(2, j))**2 + (xa(3, i) - xb(3, j))**2)
+            end do
+         end do
+         ds = sqrt(d2)
+         if (got) then
+            nyes = nyes + 1
+            if (ds - h(ia) - h(ib) > m + tol) nwrong = nwrong + 1
+         else
+            nno = nno + 1
+            if (ds < m) nwrong = nwrong + 1
+         end if
+         if (ds >= m .and. ds - h(ia) - h(ib) <= m + tol) nband = nband + 1
+      end do
+      write (output_unit, '(a,i0,a,i0,a,i0,a,i0,a,i0,a,f8.1,a)') "    ", npair, " pairs: closer than m ", nyes, &
+         ", apart ", nno, ", wrong ", nwrong, ", undecidable by the samples ", nband, ", mean test ", &
+         1.0e6_wp * tsum / npair, " us"
+      call check(error, nwrong, 0, "distance decisions contradicting the dense points")
+      if (allocated(error)) return
+      call check(error, nyes >= npair / 5 .and. nno >= npair / 5, "expected both answers among the pairs")
+   contains
+      pure function world_points(p, rot, c) result(x)
+         real(wp), intent(in) :: p(:, :), rot(3, 3), c(3)
+         real(wp), allocatable :: x(:, :)
+         integer :: q
+         allocate (x(3, size(p, 2)))
+         do q = 1, size(p, 2)
+            x(:, q) = c + matmul(rot, p(:, q))
+         end do
+      end function world_points
+      pure function pack_near(x, c, r) result(y)
+         real(wp), intent(in) :: x(:, :), c(3), r
+         real(wp), allocatable :: y(:, :)
+         logical :: keep(size(x, 2))
+         integer :: q, nk
+         do q = 1, size(x, 2)
+            keep(q) = norm2(x(:, q) - c) <= r
+         end do
+         nk = count(keep)
+         allocate (y(3, nk))
+         nk = 0
+         do q = 1, size(x, 2)
+            if (.not. keep(q)) cycle
+            nk = nk + 1
+            y(:, nk) = x(:, q)
+         end do
+      end function pack_near
+   end subroutine test_margin_real
+
+   !> Walls with a margin m: an ellipsoid (order 24) in a box keeps m from every wall exactly when
+   !> its exact extent along each axis (sqrt(sum_j R_ij^2 a_j^2)) does. "Keeps m" is never
+   !> answered for a gap below m; "too close" may be answered for gaps up to m + 3e-3 (patches
+   !> still undecided at the wall test's finest level are reported as touching, as without a
+   !> margin: `test_walls`).
+   subroutine test_margin_walls(error)
+      type(error_type), allocatable, intent(out) :: error
+      real(wp), parameter :: ax(3) = [1.0_wp, 0.7_wp, 0.45_wp], box(3) = [5.0_wp, 4.0_wp, 6.0_wp]
+      type(contact_body_type) :: be
+      type(sh_expansion_type) :: shape
+      type(rng_type) :: rng
+      real(wp) :: rot(3, 3), c(3), ext(3), m, err, gap
+      integer :: n, k, nbad, ntest, nfp
+      logical :: expect
+      shape = ellipsoid_shape(ax(1), ax(2), ax(3), ell_order)
+      err = ellipsoid_error(shape, ax)
+      call new_contact_body(be, shape, error)
+      if (allocated(error)) return
+      call new_rng(rng, 29_i8, 1_i8)
+      nbad = 0
+      nfp = 0
+      ntest = 0
+      do n = 1, 4000
+         rot = random_rotation(rng)
+         m = 0.05_wp + 0.3_wp * rng%uniform()
+         do k = 1, 3
+            ext(k) = sqrt(sum(rot(k, :)**2 * ax**2))
+         end do
+         c = [(ext(k) + m + 0.2_wp * (2.0_wp * rng%uniform() - 1.0_wp) + rng%uniform() * (box(k) - 2.0_wp * (ext(k) &
+              + m)), k=1, 3)]
+         gap = minval([(min(c(k) - ext(k), box(k) - c(k) - ext(k)), k=1, 3)])
+         if (abs(gap - m) <= 2.0_wp * err) cycle
+         expect = gap < m
+         ntest = ntest + 1
+         if (body_crosses_walls(be, c, rot, 1.0_wp, box, margin=m)) then
+            if (.not. expect) then
+               nfp = nfp + 1
+               if (gap - m > 3.0e-3_wp) nbad = nbad + 1
+            end if
+         else
+            if (expect) nbad = nbad + 1
+         end if
+      end do
+      write (output_unit, '(a,i0,a,i0,a,i0)') "    tested ", ntest, ", conservative 'too close' within 3e-3 of m ", &
+         nfp, ", wrong ", nbad
+      call check(error, ntest >= 2000, "fewer than 2000 wall cases outside the band")
+      if (allocated(error)) return
+      call check(error, nbad, 0, "wrong wall decisions with a margin")
+   end subroutine test_margin_walls
 
    subroutine test_real_shapes(error)
       type(error_type), allocatable, intent(out) :: error

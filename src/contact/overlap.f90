@@ -44,6 +44,7 @@ module anm_contact_overlap
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, node_size, nd_dir, nd_cosa, &
       & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc, support_bound, support_cell
+   use anm_sh_hessian, only: radius_hessian
    implicit none
    private
 
@@ -154,6 +155,35 @@ module anm_contact_overlap
       integer :: status = early_open
       real(wp) :: tol = 0.0_wp
    end type early_type
+
+   !> Pair visits after which the distance test (`surfaces_within`) stops and reports the pair
+   !> as too close (a safety floor never reached in our tests, like `resolution`).
+   integer, parameter :: max_within_visits = 200000
+
+   !> A piece of a body in the distance test (`surfaces_within`): the whole body (level -1) or
+   !> patch (l, i, j); its radial bounds (its own shape units, for its children); its bounding
+   !> ball (centre c, radius rho), its surface point at the cap centre (`sample`, not for a whole
+   !> body) and its oriented box (centre, axes, half-extents, radius of a ball about the centre
+   !> that holds the piece), all in B's frame and units.
+   type :: w_node_type
+      integer :: l = -1, i = 0, j = 0
+      real(wp) :: rlo = 0.0_wp, rhi = 0.0_wp
+      real(wp) :: c(3) = 0.0_wp, rho = 0.0_wp, p(3) = 0.0_wp
+      logical :: sample = .false., box = .false.
+      real(wp) :: bc(3) = 0.0_wp, be(3, 3) = 0.0_wp, bh(3) = 0.0_wp, br = 0.0_wp
+   end type w_node_type
+
+   !> Fixed data of the distance test: the poses, the A-to-B rotation, the world scales, the
+   !> world boxes that hold the parts of A (alo, ahi) and of B (blo, bhi) that can come within m
+   !> of the other body, the margin and the margin plus tolerance in B units, the finest level.
+   type :: w_frame_type
+      type(pose_type) :: pab, pba
+      real(wp) :: rot(3, 3) = 0.0_wp
+      real(wp) :: wsa = 1.0_wp, wsb = 1.0_wp
+      real(wp) :: alo(3) = 0.0_wp, ahi(3) = 0.0_wp, blo(3) = 0.0_wp, bhi(3) = 0.0_wp
+      real(wp) :: m = 0.0_wp, mtol = 0.0_wp
+      integer :: stop_level = stored_level
+   end type w_frame_type
 contains
 
    !> True when the first stages of `bodies_overlap` alone prove that the two posed bodies
@@ -163,7 +193,7 @@ contains
    !> against several bodies can look for such an overlap among all of them before it certifies
    !> any pair near contact (`packing%fits`).
    pure logical function overlap_early(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
-                                       params) result(hit)
+                                       params, margin) result(hit)
       !> First body.
       type(contact_body_type), intent(in) :: body_a
       !> Its centre (world, mm).
@@ -182,16 +212,24 @@ contains
       real(wp), intent(in) :: scale_b
       !> Parameters.
       type(contact_params_type), intent(in) :: params
+      !> Gap (mm) the bodies must keep, as in `bodies_overlap` (default 0).
+      real(wp), intent(in), optional :: margin
       type(early_type) :: e
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., e)
+      real(wp) :: m
+      m = 0.0_wp
+      if (present(margin)) m = max(0.0_wp, margin)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., m, &
+                        e)
       hit = e%status == early_overlap
    end function overlap_early
 
    !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2 and 2b
    !> only with `proofs`, 2c only with `planes`): e%status says whether they decide the pair;
-   !> e%tol is the gap tolerance of the later stages.
+   !> e%tol is the gap tolerance of the later stages. With a margin m > 0 (mm) every stage asks
+   !> whether the bodies come closer than m: the separations must exceed m, and the proofs show
+   !> points of the two bodies closer than m (the Newton-Raphson method is not used then).
    pure subroutine early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, &
-                                planes, e)
+                                planes, m, e)
       type(contact_body_type), intent(in) :: body_a, body_b
       real(wp), intent(in) :: center_a(3), rot_a(3, 3), scale_a, center_b(3), rot_b(3, 3), scale_b
       type(contact_params_type), intent(in) :: params
@@ -199,6 +237,8 @@ contains
       logical, intent(in) :: proofs
       !> Whether to search separating planes off the line of centres (stage 2c).
       logical, intent(in) :: planes
+      !> Margin (mm, >= 0).
+      real(wp), intent(in) :: m
       type(early_type), intent(out) :: e
       real(wp) :: dvec(3), dist, u(3), ra, rb, va(3), vb(3), hsum
       integer :: ka, kb
@@ -206,15 +246,15 @@ contains
       dvec = center_b - center_a
       dist = sqrt(sum(dvec**2))
       ! stage 1: bounding and inscribed spheres
-      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max) then
+      if (dist >= scale_a * body_a%r_max + scale_b * body_b%r_max + m) then
          e%status = early_disjoint
          return
       end if
-      if (dist < scale_a * body_a%r_min + scale_b * body_b%r_min) then
+      if (dist < scale_a * body_a%r_min + scale_b * body_b%r_min + m) then
          e%status = early_overlap
          return
       end if
-      if (params%method == contact_method%newton_raphson) return
+      if (params%method == contact_method%newton_raphson .and. m <= 0.0_wp) return
       u = dvec / dist
       va = matmul(u, rot_a)
       vb = -matmul(u, rot_b)
@@ -228,7 +268,7 @@ contains
          ka = support_cell(va)
          kb = support_cell(vb)
          hsum = scale_a * support_bound(body_a, va, ka) + scale_b * support_bound(body_b, vb, kb)
-         if (hsum + e%tol < dist) then
+         if (hsum + e%tol + m < dist) then
             e%status = early_disjoint
             return
          end if
@@ -237,16 +277,16 @@ contains
          ! stage 2: line of centres
          ra = scale_a * body_a%shape%radius_dir(va)
          rb = scale_b * body_b%shape%radius_dir(vb)
-         if (ra + rb > dist) then
+         if (ra + rb + m > dist) then
             e%status = early_overlap
             return
          end if
          ! stage 2b (certified mode, which reports every true overlap): the surface points of A and
          ! of B that reach furthest towards the other body (support tables), each tested against
          ! the other body along the ray to its centre
-         if (params%certified .and. tables) then
-            if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b) .or. &
-                reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a)) then
+         if ((params%certified .or. m > 0.0_wp) .and. tables) then
+            if (reach_inside(body_a, center_a, rot_a, scale_a, ka, body_b, center_b, rot_b, scale_b, m) .or. &
+                reach_inside(body_b, center_b, rot_b, scale_b, kb, body_a, center_a, rot_a, scale_a, m)) then
                e%status = early_overlap
                return
             end if
@@ -254,7 +294,7 @@ contains
       end if
       ! stage 2c: separating planes of other normals than the line of centres (support tables)
       if (planes .and. tables) then
-         if (plane_found(body_a, rot_a, scale_a, body_b, rot_b, scale_b, dvec, u, ka, kb, dist - hsum, e%tol)) &
+         if (plane_found(body_a, rot_a, scale_a, body_b, rot_b, scale_b, dvec, u, ka, kb, dist - hsum, e%tol + m)) &
             e%status = early_disjoint
       end if
    end subroutine early_stages
@@ -307,7 +347,7 @@ contains
 
    !> True when the two posed bodies overlap (thread-safe, no allocation).
    pure logical function bodies_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
-                                        params, proofs_done) result(hit)
+                                        params, proofs_done, margin) result(hit)
       !> First body.
       type(contact_body_type), intent(in) :: body_a
       !> Its centre (world, mm).
@@ -329,7 +369,13 @@ contains
       !> The caller ran `overlap_early` on this very pair and it proved no overlap: its overlap
       !> proofs (line of centres, support reach) are not evaluated again (default false).
       logical, intent(in), optional :: proofs_done
-      real(wp) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol
+      !> Gap (mm) the bodies must keep (default 0): with m > 0 the answer is whether the bodies
+      !> come closer than m (Euclidean distance between their closest points), by the certified
+      !> distance test whatever the method (`bodies_within`'s tolerance: pairs whose gap lies in
+      !> [m, m + tol] may be reported too). Exclusion shells of thickness t are tested so, on the
+      !> bare bodies, with m = t_a + t_b.
+      real(wp), intent(in), optional :: margin
+      real(wp) :: eob_lo(3), eob_hi(3), cbox_lo(3), cbox_hi(3), tol, m
       logical :: proofs
       type(pose_type) :: pab, pba
       logical :: found, certain
@@ -339,7 +385,9 @@ contains
 
       proofs = .true.
       if (present(proofs_done)) proofs = .not. proofs_done
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, .true., e)
+      m = 0.0_wp
+      if (present(margin)) m = max(0.0_wp, margin)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, .true., m, e)
       select case (e%status)
       case (early_overlap)
          hit = .true.
@@ -348,6 +396,10 @@ contains
          hit = .false.
          return
       end select
+      if (m > 0.0_wp) then
+         hit = surfaces_within(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m, e%tol, params)
+         return
+      end if
       if (params%method == contact_method%newton_raphson) then
          hit = nr_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params)
          return
@@ -399,11 +451,426 @@ contains
       hit = .false.
    end function bodies_overlap
 
-   !> True when A's stored surface point of support-table cell c, moved towards A's centre by more
-   !> than its rounding, lies inside B: then the bodies overlap.
-   pure logical function reach_inside(a, ca, ra, sa, c, b, cb, rb, sb) result(inside)
+
+   !> Whether two posed bodies come closer than m (mm) (stage 4 of `bodies_overlap` with a
+   !> margin). The two surfaces are searched together, piece against piece, from the whole bodies
+   !> down (`search_within`, best first): a pair of pieces is dropped when their bounding balls
+   !> are further apart than m, or when a lower bound of the distance between their oriented
+   !> boxes exceeds m (`box_gap`; stored certified boxes down to leaf_level, thin boxes from the
+   !> local Taylor bounds below it, `w_node`), or when a piece lies outside the world region
+   !> where it could come within m of the other body; it proves the bodies closer than m + tol
+   !> when its two surface points (cap centres) are; otherwise the larger piece is split. A pair
+   !> still undecided when both pieces have reached the resolution of certified mode, or after
+   !> `max_within_visits` pairs, is reported too. So "false" is certain (bodies at least m apart,
+   !> up to rounding); "true" means closer than m + tol. Bodies that overlap have crossing
+   !> surfaces, or one holds the other's centre, which the first stages report.
+   pure logical function surfaces_within(a, ca, ra, sa, b, cb, rb, sb, m, tol, params) result(hit)
       type(contact_body_type), intent(in) :: a, b
-      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb, m, tol
+      type(contact_params_type), intent(in) :: params
+      type(w_frame_type) :: f
+      type(contact_params_type) :: q
+      type(w_node_type) :: na, nb
+      real(wp) :: xlo(3), xhi(3), ylo(3), yhi(3)
+      integer :: visits
+      hit = .false.
+      call world_box(a%box_lo, a%box_hi, ca, ra, sa, xlo, xhi)
+      call world_box(b%box_lo, b%box_hi, cb, rb, sb, ylo, yhi)
+      f%alo = max(xlo, ylo - m)
+      f%ahi = min(xhi, yhi + m)
+      f%blo = max(ylo, xlo - m)
+      f%bhi = min(yhi, xhi + m)
+      if (any(f%alo > f%ahi) .or. any(f%blo > f%bhi)) return
+      f%pab = make_pose(ca, ra, sa, cb, rb, sb)
+      f%pba = make_pose(cb, rb, sb, ca, ra, sa)
+      f%rot = f%pab%m / f%pab%k
+      f%wsa = sa
+      f%wsb = sb
+      f%m = m / sb
+      f%mtol = (m + tol) / sb
+      q = params
+      q%certified = .true.
+      f%stop_level = stop_level(q)
+      ! the whole bodies: bounding spheres and certified boxes
+      na%rho = f%pab%k * a%r_max * (1.0_wp + 1.0e-12_wp)
+      na%c = f%pab%t
+      na%rlo = a%r_min
+      na%rhi = a%r_max
+      na%box = .true.
+      na%bc = matmul(f%pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + f%pab%t
+      na%be = f%rot
+      na%bh = f%pab%k * 0.5_wp * (a%box_hi - a%box_lo)
+      na%br = norm2(na%bh) * (1.0_wp + 1.0e-12_wp)
+      nb%rho = b%r_max
+      nb%rlo = b%r_min
+      nb%rhi = b%r_max
+      nb%box = .true.
+      nb%bc = 0.5_wp * (b%box_lo + b%box_hi)
+      nb%be = reshape([1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp], [3, 3])
+      nb%bh = 0.5_wp * (b%box_hi - b%box_lo)
+      nb%br = norm2(nb%bh) * (1.0_wp + 1.0e-12_wp)
+      visits = 0
+      call search_within(a, b, f, na, nb, visits, hit)
+   end function surfaces_within
+
+
+   !> A lower bound of the distance between two oriented boxes (centre, orthonormal axes as
+   !> columns, half-extents): the largest separation of their projections on the line of centres
+   !> and on the six box axes (each is a lower bound of the Euclidean distance), rounded down.
+   pure real(wp) function box_gap(c1, e1, h1, c2, e2, h2) result(gap)
+      real(wp), intent(in) :: c1(3), e1(3, 3), h1(3), c2(3), e2(3, 3), h2(3)
+      real(wp) :: d(3), dn, l(3), s
+      integer :: k
+      d = c2 - c1
+      dn = norm2(d)
+      gap = -huge(1.0_wp)
+      if (dn > 0.0_wp) then
+         l = d / dn
+         gap = dn - proj(e1, h1, l) - proj(e2, h2, l)
+      end if
+      do k = 1, 3
+         s = abs(dot_product(d, e1(:, k))) - h1(k) - proj(e2, h2, e1(:, k))
+         gap = max(gap, s)
+         s = abs(dot_product(d, e2(:, k))) - h2(k) - proj(e1, h1, e2(:, k))
+         gap = max(gap, s)
+      end do
+      gap = gap - 1.0e-12_wp * (dn + sum(h1) + sum(h2))
+   contains
+      pure real(wp) function proj(e, h, v) result(p)
+         real(wp), intent(in) :: e(3, 3), h(3), v(3)
+         p = h(1) * abs(dot_product(e(:, 1), v)) + h(2) * abs(dot_product(e(:, 2), v)) &
+             + h(3) * abs(dot_product(e(:, 3), v))
+      end function proj
+   end function box_gap
+
+   !> The search of `surfaces_within`, best first: pairs of pieces wait in a heap ordered by the
+   !> lower bound of their distance (`box_gap`); the nearest pair is taken, its larger piece split,
+   !> and the children that can still come within m of the other piece go back into the heap. A
+   !> pair whose two surface points are closer than m + tol ends the search (hit); so does a pair
+   !> left undecided at the finest level, or running out of `max_within_visits`. An empty heap
+   !> means no pair of pieces comes within m.
+   pure subroutine search_within(a, b, f, root_a, root_b, visits, hit)
+      type(contact_body_type), intent(in) :: a, b
+      type(w_frame_type), intent(in) :: f
+      type(w_node_type), intent(in) :: root_a, root_b
+      integer, intent(inout) :: visits
+      logical, intent(inout) :: hit
+      type(w_node_type), allocatable :: ha(:), hb(:)
+      real(wp), allocatable :: hk(:)
+      type(w_node_type) :: na, nb, kid
+      integer :: nh, n, nch, ic, jc
+      logical :: split_a, live
+      allocate (ha(32), hb(32), hk(32))
+      nh = 0
+      call heap_push(ha, hb, hk, nh, root_a, root_b, 0.0_wp)
+      do while (nh > 0)
+         call heap_pop(ha, hb, hk, nh, na, nb)
+         visits = visits + 1
+         if (visits > max_within_visits) then
+            hit = .true.
+            return
+         end if
+         if (na%l < f%stop_level .and. (na%rho >= nb%rho .or. nb%l >= f%stop_level)) then
+            split_a = .true.
+            nch = merge(patch_rows(0) * patch_cols(0), 4, na%l < 0)
+         else if (nb%l < f%stop_level) then
+            split_a = .false.
+            nch = merge(patch_rows(0) * patch_cols(0), 4, nb%l < 0)
+         else
+            hit = .true.
+            return
+         end if
+         do n = 0, nch - 1
+            if (split_a) then
+               call child_of(na, n, ic, jc)
+               call w_ball(a, f, .true., na%l + 1, ic, jc, na%rlo, na%rhi, nb%c, nb%rho, live)
+               if (.not. live) cycle
+               call w_node(a, f, .true., na%l + 1, ic, jc, na%rlo, na%rhi, kid, live)
+               if (live) call consider(kid, nb, f, ha, hb, hk, nh, hit)
+            else
+               call child_of(nb, n, ic, jc)
+               call w_ball(b, f, .false., nb%l + 1, ic, jc, nb%rlo, nb%rhi, na%c, na%rho, live)
+               if (.not. live) cycle
+               call w_node(b, f, .false., nb%l + 1, ic, jc, nb%rlo, nb%rhi, kid, live)
+               if (live) call consider(na, kid, f, ha, hb, hk, nh, hit)
+            end if
+            if (hit) return
+         end do
+      end do
+   contains
+      pure subroutine child_of(nd, k, i, j)
+         type(w_node_type), intent(in) :: nd
+         integer, intent(in) :: k
+         integer, intent(out) :: i, j
+         if (nd%l < 0) then
+            i = mod(k, patch_rows(0)) + 1
+            j = k / patch_rows(0) + 1
+         else
+            i = 2 * nd%i - 1 + mod(k, 2)
+            j = 2 * nd%j - 1 + k / 2
+         end if
+      end subroutine child_of
+   end subroutine search_within
+
+   !> A pair of pieces: dropped when apart by more than m, a witness, or into the heap.
+   pure subroutine consider(x, y, f, ha, hb, hk, nh, hit)
+      type(w_node_type), intent(in) :: x, y
+      type(w_frame_type), intent(in) :: f
+      type(w_node_type), allocatable, intent(inout) :: ha(:), hb(:)
+      real(wp), allocatable, intent(inout) :: hk(:)
+      integer, intent(inout) :: nh
+      logical, intent(inout) :: hit
+      real(wp) :: d(3), key
+      d = x%c - y%c
+      if (sum(d**2) > (x%rho + y%rho + f%m)**2 * (1.0_wp + 1.0e-11_wp)) return
+      key = box_gap(x%bc, x%be, x%bh, y%bc, y%be, y%bh)
+      if (key > f%m) return
+      if (x%sample .and. y%sample) then
+         if (sum((x%p - y%p)**2) <= f%mtol**2) then
+            hit = .true.
+            return
+         end if
+      end if
+      call heap_push(ha, hb, hk, nh, x, y, key)
+   end subroutine consider
+   !> Into the heap of `search_within` (grown when full).
+   pure subroutine heap_push(ha, hb, hk, nh, x, y, key)
+      type(w_node_type), allocatable, intent(inout) :: ha(:), hb(:)
+      real(wp), allocatable, intent(inout) :: hk(:)
+      integer, intent(inout) :: nh
+      type(w_node_type), intent(in) :: x, y
+      real(wp), intent(in) :: key
+      integer :: i, p
+      type(w_node_type), allocatable :: ta(:), tb(:)
+      real(wp), allocatable :: tk(:)
+      if (nh == size(hk)) then
+         allocate (ta(2 * nh), tb(2 * nh), tk(2 * nh))
+         ta(1:nh) = ha(1:nh)
+         tb(1:nh) = hb(1:nh)
+         tk(1:nh) = hk(1:nh)
+         call move_alloc(ta, ha)
+         call move_alloc(tb, hb)
+         call move_alloc(tk, hk)
+      end if
+      nh = nh + 1
+      i = nh
+      do while (i > 1)
+         p = i / 2
+         if (hk(p) <= key) exit
+         ha(i) = ha(p)
+         hb(i) = hb(p)
+         hk(i) = hk(p)
+         i = p
+      end do
+      ha(i) = x
+      hb(i) = y
+      hk(i) = key
+   end subroutine heap_push
+   !> The pair with the smallest key out of the heap of `search_within`.
+   pure subroutine heap_pop(ha, hb, hk, nh, x, y)
+      type(w_node_type), intent(inout) :: ha(:), hb(:)
+      real(wp), intent(inout) :: hk(:)
+      integer, intent(inout) :: nh
+      type(w_node_type), intent(out) :: x, y
+      integer :: i, c
+      real(wp) :: key
+      type(w_node_type) :: la, lb
+      x = ha(1)
+      y = hb(1)
+      la = ha(nh)
+      lb = hb(nh)
+      key = hk(nh)
+      nh = nh - 1
+      if (nh == 0) return
+      i = 1
+      do
+         c = 2 * i
+         if (c > nh) exit
+         if (c < nh) then
+            if (hk(c + 1) < hk(c)) c = c + 1
+         end if
+         if (key <= hk(c)) exit
+         ha(i) = ha(c)
+         hb(i) = hb(c)
+         hk(i) = hk(c)
+         i = c
+      end do
+      ha(i) = la
+      hb(i) = lb
+      hk(i) = key
+   end subroutine heap_pop
+
+
+   !> The cheap part of `w_node`: the piece's bounding ball in B's frame (the sector ball of its
+   !> cap and radial bounds: stored down to stored_level, the parent's [plo, phi] deeper), without
+   !> evaluating the expansion; `live` false when the ball misses the body's world region or lies
+   !> further than m from the ball (c, rho) of the other piece.
+   pure subroutine w_ball(x, f, is_a, l, i, j, plo, phi, oc, orho, live)
+      type(contact_body_type), intent(in) :: x
+      type(w_frame_type), intent(in) :: f
+      logical, intent(in) :: is_a
+      integer, intent(in) :: l, i, j
+      real(wp), intent(in) :: plo, phi, oc(3), orho
+      logical, intent(out) :: live
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, th0, th1, ph0, ph1, c(3), rho
+      integer :: k
+      if (l <= leaf_level) then
+         k = patch_index(x, l, i, j)
+         cen = x%ball(:, k)
+         rad = x%brad(k)
+      else
+         if (l <= stored_level) then
+            call patch_geometry(x, l, i, j, dir, cosa, sina)
+            call patch_bounds(x, l, i, j, rlo, rhi)
+            rlo = max(rlo, plo)
+            rhi = min(rhi, phi)
+         else
+            call patch_rect(l, i, j, th0, th1, ph0, ph1)
+            call patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
+            rlo = plo
+            rhi = phi
+         end if
+         call sector_ball(dir, cosa, sina, max(0.0_wp, rlo), rhi, cen, rad)
+      end if
+      if (is_a) then
+         live = ball_in_box(f%pab%cw + matmul(f%pab%rw, cen), rad * f%wsa * (1.0_wp + 1.0e-12_wp), f%alo, f%ahi)
+         c = matmul(f%pab%m, cen) + f%pab%t
+         rho = f%pab%k * rad * (1.0_wp + 1.0e-12_wp)
+      else
+         live = ball_in_box(f%pba%cw + matmul(f%pba%rw, cen), rad * f%wsb * (1.0_wp + 1.0e-12_wp), f%blo, f%bhi)
+         c = cen
+         rho = rad
+      end if
+      if (.not. live) return
+      live = sum((c - oc)**2) <= (rho + orho + f%m)**2 * (1.0_wp + 1.0e-11_wp)
+   end subroutine w_ball
+
+   !> Piece (l, i, j) of body x (A when is_a, else B) for `search_within`, in B's frame; `live`
+   !> false when its bounding ball misses the world region of that body in the frame `f`. Levels
+   !> <= leaf_level: the stored sector ball, oriented box and cap-centre radius. Deeper levels: r
+   !> and its gradient at the cap centre u0 (x0 = r0 u0, normal n0 along r0 u0 - grad r); with
+   !> alpha the cap's half-angle, G >= |dr/ds| over the cap (|grad r(u0)| + H alpha) and rhi >= r
+   !> there, every surface point of the piece is within (rhi + G) alpha of x0 (arc length times
+   !> the largest |dx/ds|) and within (H + 2 G + rhi) alpha^2 / 2 of the tangent plane at x0
+   !> (Taylor along the great-circle arc: the first derivative of n0 . (x - x0) vanishes at x0 and
+   !> |d2x/ds2| <= |r''| + 2 |r'| + r): a thin box about x0.
+   pure subroutine w_node(x, f, is_a, l, i, j, plo, phi, nd, live)
+      type(contact_body_type), intent(in) :: x
+      type(w_frame_type), intent(in) :: f
+      logical, intent(in) :: is_a
+      integer, intent(in) :: l, i, j
+      real(wp), intent(in) :: plo, phi
+      type(w_node_type), intent(out) :: nd
+      logical, intent(out) :: live
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, rs, g(3), alpha, gl, w, lat, wn, nrm(3), t1(3), &
+                  t2(3), th0, th1, ph0, ph1, be(3, 3), bh(3), hm, gn, hl, nn
+      integer :: k
+      if (l <= leaf_level) then
+         call patch_data(x, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
+         k = patch_index(x, l, i, j)
+         rs = x%node(nd_rc, k)
+      else
+         if (l <= stored_level) then
+            call patch_geometry(x, l, i, j, dir, cosa, sina)
+            call patch_bounds(x, l, i, j, rlo, rhi)
+         else
+            call patch_rect(l, i, j, th0, th1, ph0, ph1)
+            call patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
+            rlo = plo
+            rhi = phi
+         end if
+         call radius_hessian(x%shape, dir, r0, g, hm)
+         rs = r0
+         alpha = atan2(sina, cosa)
+         gn = norm2(g)
+         ! Taylor bounds along the great-circle arcs from the cap centre (third derivative <= T)
+         w = (gn * alpha + hm * alpha**2 * 0.5_wp + x%third * alpha**3 / 6.0_wp) * (1.0_wp + 1.0e-9_wp) &
+             + 1.0e-12_wp * x%r_max
+         rlo = max(rlo, plo, r0 - w)
+         rhi = min(rhi, phi, r0 + w)
+         hl = hm + x%third * alpha
+         gl = (gn + hm * alpha + x%third * alpha**2 * 0.5_wp) * (1.0_wp + 1.0e-9_wp)
+         lat = (rhi + gl) * alpha * (1.0_wp + 1.0e-9_wp)
+         nn = norm2(r0 * dir - g)
+         ! n0 . x(s) - n0 . x0: no first-order term; second derivative at the centre at most
+         ! (hm + r0) r0 / |r0 u0 - g| + 2 |g|^2 / |r0 u0 - g|; third at most T + 3 H + 3 G + r
+         wn = (((hm + r0) * r0 + 2.0_wp * gn**2) / nn * alpha**2 * 0.5_wp &
+               + (x%third + 3.0_wp * hl + 3.0_wp * gl + rhi) * alpha**3 / 6.0_wp) * (1.0_wp + 1.0e-9_wp) &
+              + 1.0e-12_wp * (lat + x%r_max)
+         cen = r0 * dir
+         rad = lat
+         nrm = r0 * dir - g
+         nrm = nrm / norm2(nrm)
+         if (abs(nrm(1)) < 0.6_wp) then
+            t1 = [0.0_wp, nrm(3), -nrm(2)]
+         else
+            t1 = [-nrm(3), 0.0_wp, nrm(1)]
+         end if
+         t1 = t1 / norm2(t1)
+         t2 = [nrm(2) * t1(3) - nrm(3) * t1(2), nrm(3) * t1(1) - nrm(1) * t1(3), nrm(1) * t1(2) - nrm(2) * t1(1)]
+         be(:, 1) = t1
+         be(:, 2) = t2
+         be(:, 3) = nrm
+         bh = [lat, lat, wn]
+      end if
+      if (is_a) then
+         live = ball_in_box(f%pab%cw + matmul(f%pab%rw, cen), rad * f%wsa * (1.0_wp + 1.0e-12_wp), f%alo, f%ahi)
+      else
+         live = ball_in_box(f%pba%cw + matmul(f%pba%rw, cen), rad * f%wsb * (1.0_wp + 1.0e-12_wp), f%blo, f%bhi)
+      end if
+      if (.not. live) return
+      nd%l = l
+      nd%i = i
+      nd%j = j
+      nd%rlo = rlo
+      nd%rhi = rhi
+      nd%sample = .true.
+      nd%box = .true.
+      if (is_a) then
+         nd%c = matmul(f%pab%m, cen) + f%pab%t
+         nd%rho = f%pab%k * rad * (1.0_wp + 1.0e-12_wp)
+         nd%p = matmul(f%pab%m, rs * dir) + f%pab%t
+      else
+         nd%c = cen
+         nd%rho = rad
+         nd%p = rs * dir
+      end if
+      if (l > leaf_level) then
+         ! the thin box about the cap-centre point
+         if (is_a) then
+            nd%bc = nd%c
+            nd%be = matmul(f%rot, be)
+            nd%bh = f%pab%k * bh
+            nd%br = nd%rho
+         else
+            nd%bc = cen
+            nd%be = be
+            nd%bh = bh
+            nd%br = rad
+         end if
+      else if (is_a) then
+         nd%bc = matmul(f%pab%m, x%node(nd_c:nd_c + 2, k)) + f%pab%t
+         nd%be(:, 1) = matmul(f%rot, x%node(nd_e:nd_e + 2, k))
+         nd%be(:, 2) = matmul(f%rot, x%node(nd_e + 3:nd_e + 5, k))
+         nd%be(:, 3) = matmul(f%rot, x%node(nd_e + 6:nd_e + 8, k))
+         nd%bh = f%pab%k * x%node(nd_h:nd_h + 2, k)
+         nd%br = f%pab%k * x%node(nd_r, k) * (1.0_wp + 1.0e-12_wp)
+      else
+         nd%bc = x%node(nd_c:nd_c + 2, k)
+         nd%be(:, 1) = x%node(nd_e:nd_e + 2, k)
+         nd%be(:, 2) = x%node(nd_e + 3:nd_e + 5, k)
+         nd%be(:, 3) = x%node(nd_e + 6:nd_e + 8, k)
+         nd%bh = x%node(nd_h:nd_h + 2, k)
+         nd%br = x%node(nd_r, k)
+      end if
+   end subroutine w_node
+
+   !> True when A's stored surface point of support-table cell c, moved towards A's centre by more
+   !> than its rounding, lies inside B, or (margin m > 0, mm) closer than m to B's surface point
+   !> on the ray from B's centre: then the bodies overlap (come closer than m).
+   pure logical function reach_inside(a, ca, ra, sa, c, b, cb, rb, sb, m) result(inside)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb, m
       integer, intent(in) :: c
       real(wp) :: x(3), y(3), d, shrink
       ! the stored point is r(u) u to single precision (relative 6e-8, so its direction within
@@ -415,7 +882,7 @@ contains
       if (d <= 0.0_wp) then
          inside = .true.
       else
-         inside = d < b%shape%radius_dir(y / d)
+         inside = d < b%shape%radius_dir(y / d) + m / sb
       end if
    end function reach_inside
 
@@ -470,10 +937,12 @@ contains
       end do
    end function overlap_depth
 
-   !> True if any part of the posed body touches or leaves the box [0, L]^3. "False" is
-   !> guaranteed by the certified patch bounds: patches still undecided at `wall_level` are reported
-   !> as touching (a possible false positive within their bound width of the wall).
-   pure logical function body_crosses_walls(body, center, rot, scale, box_length) result(out)
+   !> True if any part of the posed body touches or leaves the box [0, L]^3, or with a margin m
+   !> (mm) comes closer than m to a wall (the body is then tested against the box [m, L - m]^3).
+   !> "False" is guaranteed by the certified patch bounds: patches still undecided at
+   !> `wall_level` are reported as touching (a possible false positive within their bound width of
+   !> the wall).
+   pure logical function body_crosses_walls(body, center, rot, scale, box_length, margin) result(out)
       !> Body.
       type(contact_body_type), intent(in) :: body
       !> Centre (world, mm).
@@ -484,6 +953,26 @@ contains
       real(wp), intent(in) :: scale
       !> Box edge lengths (mm).
       real(wp), intent(in) :: box_length(3)
+      !> Gap to keep from the walls (mm, default 0).
+      real(wp), intent(in), optional :: margin
+      real(wp) :: c(3), lb(3)
+      c = center
+      lb = box_length
+      if (present(margin)) then
+         if (margin > 0.0_wp) then
+            c = center - margin
+            lb = box_length - 2.0_wp * margin
+         end if
+      end if
+      out = .true.
+      if (any(lb <= 0.0_wp)) return
+      out = crosses_box(body, c, rot, scale, lb)
+   end function body_crosses_walls
+
+   !> `body_crosses_walls` without a margin.
+   pure logical function crosses_box(body, center, rot, scale, box_length) result(out)
+      type(contact_body_type), intent(in) :: body
+      real(wp), intent(in) :: center(3), rot(3, 3), scale, box_length(3)
       integer :: k, sgn, i, j, code
       real(wp) :: e(3), thr
 
@@ -513,7 +1002,7 @@ contains
          end do
       end do
       out = .false.
-   end function body_crosses_walls
+   end function crosses_box
 
    !> True when the body-frame point p of body A (pose A->B) is inside body B.
    pure logical function point_inside(body_b, pose_m, pose_t, p) result(inside)
