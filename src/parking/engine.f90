@@ -182,22 +182,22 @@ contains
       type(kind_set_type), intent(in) :: ks
       type(particle_kind_type), intent(in) :: kinds(:)
       integer, intent(in), optional :: unit
-      integer(i8) :: total, shell
+      integer(i8) :: total, bare
       integer :: k, n
       if (.not. present(unit)) return
       if (unit < 0) return
       if (ks%p%nlayer > 0) then
          total = 0
-         shell = 0
+         bare = 0
          n = count(ks%built)
          do k = 1, size(kinds)
             if (.not. ks%built(k)) cycle
             total = total + kind_bytes(kinds(k))
-            if (allocated(kinds(k)%shell_body)) shell = shell + body_bytes(kinds(k)%shell_body)
+            bare = bare + body_bytes(kinds(k)%body)
          end do
          write (unit, '(a,i0,a,i0,a,f0.2,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
-            real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (shell contact body ", &
-            real(shell, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
+            real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (contact body ", &
+            real(bare, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
       end if
       write (unit, '(a,i0,a)') "kinds: support tables built for ", ks%tables_built, " contact bodies"
       if (allocated(ks%exchange)) then

@@ -2,8 +2,9 @@
 !> at the sieve's order, contact body, shell layers) and the set of them for a run, built lazily
 !> (a kind is built when first needed; a kind equal to an earlier one is built once and copied;
 !> the geometry and bare contact body of a (shape, order) are built once and copied to its width
-!> levels, which differ only in their shells). With exclusion shells a kind keeps only its shell
-!> contact body's patch arrays (`bare_patches`). With p%cache_directory (ANM_CACHE) the bases and
+!> levels, which differ only in their shells). Shells that take part in the packing ('exclude',
+!> 'shell_overlap') have no contact body of their own: the packing keeps their thickness as a gap
+!> around the bare bodies (`gap`). With p%cache_directory (ANM_CACHE) the bases and
 !> shells are read from and written to an on-disk cache (anm_parking_kind_cache, docs/shells.md).
 !> With an `exchange` (the MPI build), the processes build the kinds of a list in shares and send
 !> each other what they built, in the cache's payload format.
@@ -54,12 +55,12 @@ module anm_parking_kinds
       integer :: level = 0
       !> Geometry at the order used (shape units).
       real(wp) :: width = 0.0_wp, length = 0.0_wp, volume = 0.0_wp
-      !> Bare particle. With exclusion shells (mode 'exclude') the packing tests only the shell
-      !> bodies, and this body keeps its shape and certified scalars (r_min, r_max, boxes) but not
-      !> its patch arrays (`bare_patches`): about 4.5 MB less per kind.
+      !> Bare particle (the only contact body: shells are tested as a gap around it).
       type(contact_body_type) :: body
-      !> Particle plus its outermost shell (allocated with shells).
-      type(contact_body_type), allocatable :: shell_body
+      !> Thickness of the outermost shell (shape units) that the packing keeps as a gap around
+      !> the bare body (modes 'exclude' and 'shell_overlap'; 0 otherwise): the distance test of
+      !> `bodies_overlap` with a margin.
+      real(wp) :: gap = 0.0_wp
       !> Outer surfaces of the layers (shape units) and the volume inside each.
       type(sh_expansion_type), allocatable :: layers(:)
       !> Volume inside each layer's outer surface (shape units).
@@ -308,11 +309,6 @@ contains
                end do
             end block
          end if
-         if (.not. bare_patches(self%p)) then
-            do i = 1, size(todo)
-               call strip_patches(kinds(todo(i))%body)
-            end do
-         end if
          self%built(todo) = .true.
       end if
       do i = 1, size(list)
@@ -352,9 +348,6 @@ contains
       do k = 1, size(kinds)
          if (.not. self%built(k)) cycle
          if (needs_table(kinds(k)%body)) n = n + 1
-         if (allocated(kinds(k)%shell_body)) then
-            if (needs_table(kinds(k)%shell_body)) n = n + 1
-         end if
       end do
       if (n == 0) return
       if (.not. force .and. attempts - self%attempts_tabled < int(attempts_per_table, int64) * n) return
@@ -362,7 +355,6 @@ contains
       !$omp parallel do default(none) shared(kinds, todo) private(i) schedule(dynamic)
       do i = 1, size(todo)
          call add_support_table(kinds(todo(i))%body)
-         if (allocated(kinds(todo(i))%shell_body)) call add_support_table(kinds(todo(i))%shell_body)
       end do
       !$omp end parallel do
       self%tables_built = self%tables_built + n
@@ -454,48 +446,19 @@ contains
       end do
    end subroutine build_list
 
-   !> Whether the kinds keep their bare body's patch arrays: needed unless the packing tests only
-   !> the shell bodies (exclusion shells).
-   pure logical function bare_patches(p)
-      type(kind_params_type), intent(in) :: p
-      bare_patches = p%nlayer == 0 .or. p%mode /= shell_mode%exclude
-   end function bare_patches
-
-   !> Drop a contact body's patch arrays (its shape and certified scalars stay).
-   subroutine strip_patches(body)
-      type(contact_body_type), intent(inout) :: body
-      if (allocated(body%dir)) deallocate (body%dir)
-      if (allocated(body%cosa)) deallocate (body%cosa)
-      if (allocated(body%sina)) deallocate (body%sina)
-      if (allocated(body%rlo)) deallocate (body%rlo)
-      if (allocated(body%rhi)) deallocate (body%rhi)
-      if (allocated(body%ball)) deallocate (body%ball)
-      if (allocated(body%brad)) deallocate (body%brad)
-      if (allocated(body%dlo)) deallocate (body%dlo)
-      if (allocated(body%dhi)) deallocate (body%dhi)
-      if (allocated(body%row_ct)) deallocate (body%row_ct)
-      if (allocated(body%row_st)) deallocate (body%row_st)
-      if (allocated(body%row_cosa)) deallocate (body%row_cosa)
-      if (allocated(body%row_sina)) deallocate (body%row_sina)
-      if (allocated(body%col_cp)) deallocate (body%col_cp)
-      if (allocated(body%col_sp)) deallocate (body%col_sp)
-      if (allocated(body%node)) deallocate (body%node)
-      if (allocated(body%supp)) deallocate (body%supp)
-   end subroutine strip_patches
-
-   !> Cache key of a kind's base: order, N_ext, whether the patch arrays are kept, coefficients.
+   !> Cache key of a kind's base: order, N_ext, 1 (the patch arrays are kept), coefficients.
    function base_key(ks, kd) result(key)
       type(kind_set_type), intent(in) :: ks
       type(particle_kind_type), intent(in) :: kd
       type(byte_writer_type) :: w
       integer(int8), allocatable :: key(:)
       call key_start(ks%cache, "base", w)
-      call w%put([kd%order, ks%p%n_ext, merge(1, 0, bare_patches(ks%p))])
+      call w%put([kd%order, ks%p%n_ext, 1])
       call put_expansion(w, sh_truncate(ks%shapes(kd%shape), kd%order))
       key = w%bytes()
    end function base_key
 
-   !> Cache key of a kind's shells: order, N_ext, whether a shell body is built, thicknesses
+   !> Cache key of a kind's shells: order, N_ext, the payload's version (2: no shell body), thicknesses
    !> (shape units), coefficients.
    function shells_key(ks, kd) result(key)
       type(kind_set_type), intent(in) :: ks
@@ -505,7 +468,7 @@ contains
       real(wp), allocatable :: t(:)
       t = shell_thickness(ks%p, kd)
       call key_start(ks%cache, "shells", w)
-      call w%put([kd%order, ks%p%n_ext, merge(1, 0, ks%p%mode /= shell_mode%overlap), size(t)])
+      call w%put([kd%order, ks%p%n_ext, 2, size(t)])
       call w%put(t)
       call put_expansion(w, sh_truncate(ks%shapes(kd%shape), kd%order))
       key = w%bytes()
@@ -563,7 +526,7 @@ contains
       type(particle_kind_type), intent(in) :: kd
       type(byte_writer_type), intent(inout) :: w
       call w%put([kd%width, kd%length, kd%volume])
-      call put_body(w, kd%body, bare_patches(ks%p))
+      call put_body(w, kd%body, .true.)
    end subroutine encode_base
 
    !> A kind's shells from the cache (hit) or nothing; its base is in place.
@@ -579,7 +542,7 @@ contains
    end subroutine load_shells
 
    !> A kind's shells from a payload (`encode_shells`); its base is in place. `ok` false (and no
-   !> shells) when the payload is malformed or holds another number of layers or shell mode.
+   !> shells) when the payload is malformed or holds another number of layers.
    subroutine decode_shells(ks, kd, r, ok)
       type(kind_set_type), intent(in) :: ks
       type(particle_kind_type), intent(inout) :: kd
@@ -587,7 +550,7 @@ contains
       logical, intent(out) :: ok
       type(sh_expansion_type), allocatable :: layers(:)
       real(wp), allocatable :: vol(:)
-      integer :: n, k, has_body
+      integer :: n, k
       ok = .false.
       call r%get(n)
       if (n /= ks%p%nlayer) return
@@ -596,22 +559,11 @@ contains
          call get_expansion(r, layers(k))
       end do
       call r%get(vol)
-      call r%get(has_body)
-      if (has_body == 1) then
-         allocate (kd%shell_body)
-         call get_body(r, kd%shell_body)
-      end if
-      if (.not. r%done() .or. has_body /= merge(1, 0, ks%p%mode /= shell_mode%overlap)) then
-         if (allocated(kd%shell_body)) deallocate (kd%shell_body)
-         return
-      end if
+      if (.not. r%done()) return
       ok = .true.
       call move_alloc(layers, kd%layers)
       call move_alloc(vol, kd%layer_volume)
-      if (allocated(kd%shell_body)) then
-         kd%shell_body%shape = sh_truncate(kd%layers(n), kd%layers(n)%nmax)
-         call shell_radii(ks%p, kd)
-      end if
+      call shell_radii(ks%p, kd)
    end subroutine decode_shells
 
    !> Store a kind's shells.
@@ -633,8 +585,6 @@ contains
          call put_expansion(w, kd%layers(k))
       end do
       call w%put(kd%layer_volume)
-      call w%put(merge(1, 0, allocated(kd%shell_body)))
-      if (allocated(kd%shell_body)) call put_body(w, kd%shell_body, .true.)
    end subroutine encode_shells
 
    !> A cache entry that held the right key but a malformed payload: counted as rejected.
@@ -755,21 +705,22 @@ contains
       do k = 1, size(t)
          kd%layer_volume(k) = reports(k)%outer_volume
       end do
-      ! overlapping shells do not take part in the parking: no contact body for them
-      if (p%mode == shell_mode%overlap) return
-      allocate (kd%shell_body)
-      call new_contact_body(kd%shell_body, kd%layers(size(t)), error, next=p%n_ext, table=.false.)
-      if (allocated(error)) return
+      ! overlapping shells do not take part in the parking; the others are a gap kept around the
+      ! bare body by the distance test (no contact body of their own)
       call shell_radii(p, kd)
    end subroutine prepare_shells
 
-   !> The overlap radii of a kind with a shell body.
+   !> The gap and overlap radii of a kind with shells.
    subroutine shell_radii(p, kd)
       type(kind_params_type), intent(in) :: p
       type(particle_kind_type), intent(inout) :: kd
-      kd%r_out = max(kd%r_out, kd%shell_body%r_max)
-      kd%r_in_query = kd%shell_body%r_min
-      if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%shell_body%r_min
+      real(wp), allocatable :: t(:)
+      if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) return
+      t = shell_thickness(p, kd)
+      kd%gap = maxval(t)
+      kd%r_out = kd%body%r_max + kd%gap
+      kd%r_in_query = kd%body%r_min + kd%gap
+      if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%body%r_min + kd%gap
    end subroutine shell_radii
 
    !> Memory held by a kind (bytes): its bodies, layers and the scalars.
@@ -778,7 +729,6 @@ contains
       type(particle_kind_type), intent(in) :: kd
       integer :: k
       n = storage_size(kd) / 8 + body_bytes(kd%body)
-      if (allocated(kd%shell_body)) n = n + body_bytes(kd%shell_body)
       if (allocated(kd%layers)) then
          do k = 1, size(kd%layers)
             n = n + expansion_bytes(kd%layers(k))

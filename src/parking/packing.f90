@@ -454,7 +454,7 @@ contains
       associate (p => self%p, kq => self%kinds(kn))
          if (.not. p%periodic .and. jmin == 0) then
             if (p%nlayer > 0 .and. p%mode == shell_mode%exclude) then
-               if (body_crosses_walls(kq%shell_body, x, rr, sc, p%box)) return
+               if (body_crosses_walls(kq%body, x, rr, sc, p%box, margin=sc * kq%gap)) return
             else
                if (body_crosses_walls(kq%body, x, rr, sc, p%box)) return
             end if
@@ -512,12 +512,15 @@ contains
             xj = self%center(:, j) + scratch%shift(:, i)
             associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
                if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
+                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, 0.0_wp)) return
                else if (p%mode == shell_mode%exclude) then
-                  if (pair_overlap(early, done, kq%shell_body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  ! both shells: the bare bodies keep the sum of their thicknesses apart
+                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, &
+                                   sc * kq%gap + sj * kj%gap)) return
                else
-                  if (pair_overlap(early, done, kq%shell_body, x, rr, sc, kj%body, xj, rj, sj, p%contact)) return
-                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%shell_body, xj, rj, sj, p%contact)) return
+                  ! each shell against the other bare body: the larger thickness apart
+                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, &
+                                   max(sc * kq%gap, sj * kj%gap))) return
                end if
             end associate
          end do
@@ -525,16 +528,17 @@ contains
       hit = .false.
    end function any_overlap
 
-   !> `bodies_overlap` (proofs_done passed on), or with early `overlap_early`, of two posed bodies.
-   pure logical function pair_overlap(early, done, a, xa, ra, sa, b, xb, rb, sb, params) result(hit)
+   !> `bodies_overlap` (proofs_done passed on), or with early `overlap_early`, of two posed bodies
+   !> that must keep the gap m (mm; 0: must not overlap).
+   pure logical function pair_overlap(early, done, a, xa, ra, sa, b, xb, rb, sb, params, m) result(hit)
       logical, intent(in) :: early, done
       type(contact_body_type), intent(in) :: a, b
-      real(wp), intent(in) :: xa(3), ra(3, 3), sa, xb(3), rb(3, 3), sb
+      real(wp), intent(in) :: xa(3), ra(3, 3), sa, xb(3), rb(3, 3), sb, m
       type(contact_params_type), intent(in) :: params
       if (early) then
-         hit = overlap_early(a, xa, ra, sa, b, xb, rb, sb, params)
+         hit = overlap_early(a, xa, ra, sa, b, xb, rb, sb, params, margin=m)
       else
-         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params, proofs_done=done)
+         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params, proofs_done=done, margin=m)
       end if
    end function pair_overlap
 
