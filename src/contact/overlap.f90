@@ -156,9 +156,10 @@ module anm_contact_overlap
       real(wp) :: tol = 0.0_wp
    end type early_type
 
-   !> Pair visits after which the distance test (`surfaces_within`) stops and reports the pair
-   !> as too close (a safety floor never reached in our tests, like `resolution`).
-   integer, parameter :: max_within_visits = 200000
+   !> Pair visits, and pairs waiting in its heap, after which the distance test
+   !> (`surfaces_within`) stops and reports the pair as too close (safety floors never reached in
+   !> our tests, like `resolution`; the heap's bound keeps its memory below about 8 MB).
+   integer, parameter :: max_within_visits = 200000, max_within_heap = 16384
 
    !> A piece of a body in the distance test (`surfaces_within`): the whole body (level -1) or
    !> patch (l, i, j); its radial bounds (its own shape units, for its children); its bounding
@@ -218,8 +219,8 @@ contains
       real(wp) :: m
       m = 0.0_wp
       if (present(margin)) m = max(0.0_wp, margin)
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., m, &
-                        e)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., &
+                        m, e)
       hit = e%status == early_overlap
    end function overlap_early
 
@@ -387,7 +388,8 @@ contains
       if (present(proofs_done)) proofs = .not. proofs_done
       m = 0.0_wp
       if (present(margin)) m = max(0.0_wp, margin)
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, .true., m, e)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, proofs, .true., &
+                        m, e)
       select case (e%status)
       case (early_overlap)
          hit = .true.
@@ -461,9 +463,11 @@ contains
    !> where it could come within m of the other body; it proves the bodies closer than m + tol
    !> when its two surface points (cap centres) are; otherwise the larger piece is split. A pair
    !> still undecided when both pieces have reached the resolution of certified mode, or after
-   !> `max_within_visits` pairs, is reported too. So "false" is certain (bodies at least m apart,
-   !> up to rounding); "true" means closer than m + tol. Bodies that overlap have crossing
-   !> surfaces, or one holds the other's centre, which the first stages report.
+   !> `max_within_visits` pairs (`max_within_heap` waiting), is reported too. So "false" is
+   !> certain (bodies at least m apart, up to rounding); "true" means closer than m + tol, except
+   !> at those safety floors (the finest pieces are about r pi/65536, far below tol). Bodies that
+   !> overlap have crossing surfaces, or one holds the other's centre, which the first stages
+   !> report.
    pure logical function surfaces_within(a, ca, ra, sa, b, cb, rb, sb, m, tol, params) result(hit)
       type(contact_body_type), intent(in) :: a, b
       real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb, m, tol
@@ -612,7 +616,8 @@ contains
       end subroutine child_of
    end subroutine search_within
 
-   !> A pair of pieces: dropped when apart by more than m, a witness, or into the heap.
+   !> A pair of pieces: dropped when apart by more than m, a witness, or into the heap (hit when
+   !> the heap is full: `max_within_heap`).
    pure subroutine consider(x, y, f, ha, hb, hk, nh, hit)
       type(w_node_type), intent(in) :: x, y
       type(w_frame_type), intent(in) :: f
@@ -631,8 +636,13 @@ contains
             return
          end if
       end if
+      if (nh >= max_within_heap) then
+         hit = .true.
+         return
+      end if
       call heap_push(ha, hb, hk, nh, x, y, key)
    end subroutine consider
+
    !> Into the heap of `search_within` (grown when full).
    pure subroutine heap_push(ha, hb, hk, nh, x, y, key)
       type(w_node_type), allocatable, intent(inout) :: ha(:), hb(:)
@@ -666,6 +676,7 @@ contains
       hb(i) = y
       hk(i) = key
    end subroutine heap_push
+
    !> The pair with the smallest key out of the heap of `search_within`.
    pure subroutine heap_pop(ha, hb, hk, nh, x, y)
       type(w_node_type), intent(inout) :: ha(:), hb(:)
@@ -699,7 +710,6 @@ contains
       hb(i) = lb
       hk(i) = key
    end subroutine heap_pop
-
 
    !> The cheap part of `w_node`: the piece's bounding ball in B's frame (the sector ball of its
    !> cap and radial bounds: stored down to stored_level, the parent's [plo, phi] deeper), without
@@ -747,13 +757,15 @@ contains
 
    !> Piece (l, i, j) of body x (A when is_a, else B) for `search_within`, in B's frame; `live`
    !> false when its bounding ball misses the world region of that body in the frame `f`. Levels
-   !> <= leaf_level: the stored sector ball, oriented box and cap-centre radius. Deeper levels: r
-   !> and its gradient at the cap centre u0 (x0 = r0 u0, normal n0 along r0 u0 - grad r); with
-   !> alpha the cap's half-angle, G >= |dr/ds| over the cap (|grad r(u0)| + H alpha) and rhi >= r
-   !> there, every surface point of the piece is within (rhi + G) alpha of x0 (arc length times
-   !> the largest |dx/ds|) and within (H + 2 G + rhi) alpha^2 / 2 of the tangent plane at x0
-   !> (Taylor along the great-circle arc: the first derivative of n0 . (x - x0) vanishes at x0 and
-   !> |d2x/ds2| <= |r''| + 2 |r'| + r): a thin box about x0.
+   !> <= leaf_level: the stored sector ball, oriented box and cap-centre radius. Deeper levels: r0,
+   !> the gradient g and the Hessian's largest |eigenvalue| h at the cap centre u0
+   !> (`radius_hessian`; x0 = r0 u0, normal n0 along r0 u0 - g). With alpha the cap's
+   !> half-angle, T the certified bound of |d3r/ds3|, G = |g| + h alpha + T alpha^2/2 >= |dr/ds|
+   !> and rhi >= r over the cap (Taylor along the great-circle arcs from u0), every surface point
+   !> of the piece is within (rhi + G) alpha of x0 (arc length times the largest |dx/ds|) and within
+   !> [((h + r0) r0 + 2 |g|^2) / |r0 u0 - g|] alpha^2/2 + (T + 3 (h + T alpha) + 3 G + rhi) alpha^3/6
+   !> of the tangent plane at x0 (the first derivative of n0 . (x - x0) vanishes at x0; the
+   !> second at x0 and the third along the arc are bounded so): a thin box about x0.
    pure subroutine w_node(x, f, is_a, l, i, j, plo, phi, nd, live)
       type(contact_body_type), intent(in) :: x
       type(w_frame_type), intent(in) :: f

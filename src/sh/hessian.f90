@@ -4,7 +4,7 @@
 !>
 !> Usage:
 !>     call radius_hessian(shape, u, r, g, hmax)
-!>     ! |d2r/ds2| <= hmax along every great circle through u; the surface normal is along r u - g
+!>     ! at u, |d2r/ds2| <= hmax along every great circle through u; the surface normal is along r u - g
 module anm_sh_hessian
    use anm_core_kinds, only: wp
    use anm_sh_expansion, only: sh_expansion_type
@@ -17,10 +17,11 @@ module anm_sh_hessian
 contains
 
    !> r, its surface gradient g (tangent 3-vector: r_theta e_theta + (r_phi / sin theta) e_phi)
-   !> and hmax, the largest |eigenvalue| of its covariant Hessian on the unit sphere (so that
-   !> |d2r/ds2| <= hmax along every great circle through u), at the direction u (body frame, need
-   !> not be normalised, not a pole). The outward normal of the surface r(u) u there is along
-   !> r u - g. One fused evaluation (`sh_sum_surface`), no allocation.
+   !> and hmax, the largest |eigenvalue| of its covariant Hessian on the unit sphere (so that, at
+   !> u itself, |d2r/ds2| <= hmax along every great circle through u), at the direction u (body
+   !> frame, need not be normalised, not a pole). The outward normal of the surface r(u) u there
+   !> is along r u - g. One fused evaluation (`sh_sum_surface`), no allocation; the factors e_nm
+   !> are computed at each call (about (N + 2)^2 / 2 square roots).
    pure subroutine radius_hessian(shape, u, r, g, hmax)
       !> Expansion (its Legendre table of degree nmax + 1).
       type(sh_expansion_type), intent(in) :: shape
