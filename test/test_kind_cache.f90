@@ -271,7 +271,7 @@ contains
       ! (src/parking/kind_cache.f90) and compared in same_body above; then update this size and
       ! bump cache_format_version (exceptions: the support table `supp`, built later and never
       ! cached, and the expansion's Legendre table, rebuilt from the coefficients)
-      call check(error, storage_size(body), 15552, "storage_size(contact_body_type) (bits)")
+      call check(error, storage_size(body), 16064, "storage_size(contact_body_type) (bits)")
    end subroutine test_layout
 
    subroutine read_bytes(path, bytes)

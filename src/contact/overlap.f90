@@ -44,7 +44,6 @@ module anm_contact_overlap
    use anm_contact_body, only: contact_body_type, leaf_level, stored_level, patch_rows, patch_cols, patch_index, &
       & patch_cap, sector_ball, default_next, patch_geometry, patch_bounds, slope_bound, node_size, nd_dir, nd_cosa, &
       & nd_sina, nd_c, nd_r, nd_e, nd_h, nd_ball, nd_brad, nd_rc, support_bound, support_cell
-   use anm_sh_hessian, only: radius_hessian
    implicit none
    private
 
@@ -170,7 +169,7 @@ module anm_contact_overlap
       integer :: l = -1, i = 0, j = 0
       real(wp) :: rlo = 0.0_wp, rhi = 0.0_wp
       real(wp) :: c(3) = 0.0_wp, rho = 0.0_wp, p(3) = 0.0_wp
-      logical :: sample = .false., box = .false.
+      logical :: sample = .false.
       real(wp) :: bc(3) = 0.0_wp, be(3, 3) = 0.0_wp, bh(3) = 0.0_wp, br = 0.0_wp
    end type w_node_type
 
@@ -372,7 +371,7 @@ contains
       logical, intent(in), optional :: proofs_done
       !> Gap (mm) the bodies must keep (default 0): with m > 0 the answer is whether the bodies
       !> come closer than m (Euclidean distance between their closest points), by the certified
-      !> distance test whatever the method (`bodies_within`'s tolerance: pairs whose gap lies in
+      !> distance test whatever the method (`surfaces_within`'s tolerance: pairs whose gap lies in
       !> [m, m + tol] may be reported too). Exclusion shells of thickness t are tested so, on the
       !> bare bodies, with m = t_a + t_b.
       real(wp), intent(in), optional :: margin
@@ -500,7 +499,6 @@ contains
       na%c = f%pab%t
       na%rlo = a%r_min
       na%rhi = a%r_max
-      na%box = .true.
       na%bc = matmul(f%pab%m, 0.5_wp * (a%box_lo + a%box_hi)) + f%pab%t
       na%be = f%rot
       na%bh = f%pab%k * 0.5_wp * (a%box_hi - a%box_lo)
@@ -508,7 +506,6 @@ contains
       nb%rho = b%r_max
       nb%rlo = b%r_min
       nb%rhi = b%r_max
-      nb%box = .true.
       nb%bc = 0.5_wp * (b%box_lo + b%box_hi)
       nb%be = reshape([1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp, 0.0_wp, 0.0_wp, 0.0_wp, 1.0_wp], [3, 3])
       nb%bh = 0.5_wp * (b%box_hi - b%box_lo)
@@ -587,15 +584,11 @@ contains
          do n = 0, nch - 1
             if (split_a) then
                call child_of(na, n, ic, jc)
-               call w_ball(a, f, .true., na%l + 1, ic, jc, na%rlo, na%rhi, nb%c, nb%rho, live)
-               if (.not. live) cycle
-               call w_node(a, f, .true., na%l + 1, ic, jc, na%rlo, na%rhi, kid, live)
+               call w_node(a, f, .true., na%l + 1, ic, jc, na%rlo, na%rhi, nb, kid, live)
                if (live) call consider(kid, nb, f, ha, hb, hk, nh, hit)
             else
                call child_of(nb, n, ic, jc)
-               call w_ball(b, f, .false., nb%l + 1, ic, jc, nb%rlo, nb%rhi, na%c, na%rho, live)
-               if (.not. live) cycle
-               call w_node(b, f, .false., nb%l + 1, ic, jc, nb%rlo, nb%rhi, kid, live)
+               call w_node(b, f, .false., nb%l + 1, ic, jc, nb%rlo, nb%rhi, na, kid, live)
                if (live) call consider(na, kid, f, ha, hb, hk, nh, hit)
             end if
             if (hit) return
@@ -616,8 +609,9 @@ contains
       end subroutine child_of
    end subroutine search_within
 
-   !> A pair of pieces: dropped when apart by more than m, a witness, or into the heap (hit when
-   !> the heap is full: `max_within_heap`).
+   !> A pair of pieces whose balls `w_node` found within m of each other: dropped when their boxes
+   !> are apart by more than m, a witness, or into the heap (hit when the heap is full:
+   !> `max_within_heap`).
    pure subroutine consider(x, y, f, ha, hb, hk, nh, hit)
       type(w_node_type), intent(in) :: x, y
       type(w_frame_type), intent(in) :: f
@@ -625,9 +619,7 @@ contains
       real(wp), allocatable, intent(inout) :: hk(:)
       integer, intent(inout) :: nh
       logical, intent(inout) :: hit
-      real(wp) :: d(3), key
-      d = x%c - y%c
-      if (sum(d**2) > (x%rho + y%rho + f%m)**2 * (1.0_wp + 1.0e-11_wp)) return
+      real(wp) :: key
       key = box_gap(x%bc, x%be, x%bh, y%bc, y%be, y%bh)
       if (key > f%m) return
       if (x%sample .and. y%sample) then
@@ -711,19 +703,32 @@ contains
       hk(i) = key
    end subroutine heap_pop
 
-   !> The cheap part of `w_node`: the piece's bounding ball in B's frame (the sector ball of its
-   !> cap and radial bounds: stored down to stored_level, the parent's [plo, phi] deeper), without
-   !> evaluating the expansion; `live` false when the ball misses the body's world region or lies
-   !> further than m from the ball (c, rho) of the other piece.
-   pure subroutine w_ball(x, f, is_a, l, i, j, plo, phi, oc, orho, live)
+   !> Piece (l, i, j) of body x (A when is_a, else B) for `search_within`, in B's frame; `live`
+   !> false when its bounding ball misses the world region of that body in the frame `f`, or lies
+   !> further than m from the ball of the other piece `other` (both tested on the sector ball of
+   !> the cap and its radial bounds, before the expansion is evaluated). Levels <= leaf_level: the
+   !> stored sector ball, oriented box and cap-centre radius. Deeper levels: r0, the gradient g and
+   !> the Hessian's largest |eigenvalue| h at the cap centre u0 (`radius_hessian`; x0 = r0 u0,
+   !> normal n0 along r0 u0 - g). With alpha the cap's half-angle, T the certified bound of
+   !> |d3r/ds3|, G = |g| + h alpha + T alpha^2/2 >= |dr/ds| and rhi >= r over the cap (Taylor
+   !> along the great-circle arcs from u0), every surface point of the piece is within
+   !> (rhi + G) alpha of x0 (arc length times the largest |dx/ds|) and within
+   !> [((h + r0) r0 + 2 |g|^2) / |r0 u0 - g|] alpha^2/2 + (T + 3 (h + T alpha) + 3 G + rhi) alpha^3/6
+   !> of the tangent plane at x0 (the first derivative of n0 . (x - x0) vanishes at x0; the
+   !> second at x0 and the third along the arc are bounded so): a thin box about x0.
+   pure subroutine w_node(x, f, is_a, l, i, j, plo, phi, other, nd, live)
       type(contact_body_type), intent(in) :: x
       type(w_frame_type), intent(in) :: f
       logical, intent(in) :: is_a
       integer, intent(in) :: l, i, j
-      real(wp), intent(in) :: plo, phi, oc(3), orho
+      real(wp), intent(in) :: plo, phi
+      type(w_node_type), intent(in) :: other
+      type(w_node_type), intent(out) :: nd
       logical, intent(out) :: live
-      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, th0, th1, ph0, ph1, c(3), rho
+      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, rs, g(3), alpha, gl, w, lat, wn, nrm(3), t1(3), &
+                  t2(3), th0, th1, ph0, ph1, be(3, 3), bh(3), hm, gn, hl, nn
       integer :: k
+      ! the cap, its radial bounds and sector ball (stored down to leaf_level)
       if (l <= leaf_level) then
          k = patch_index(x, l, i, j)
          cen = x%ball(:, k)
@@ -742,64 +747,23 @@ contains
          end if
          call sector_ball(dir, cosa, sina, max(0.0_wp, rlo), rhi, cen, rad)
       end if
-      if (is_a) then
-         live = ball_in_box(f%pab%cw + matmul(f%pab%rw, cen), rad * f%wsa * (1.0_wp + 1.0e-12_wp), f%alo, f%ahi)
-         c = matmul(f%pab%m, cen) + f%pab%t
-         rho = f%pab%k * rad * (1.0_wp + 1.0e-12_wp)
-      else
-         live = ball_in_box(f%pba%cw + matmul(f%pba%rw, cen), rad * f%wsb * (1.0_wp + 1.0e-12_wp), f%blo, f%bhi)
-         c = cen
-         rho = rad
-      end if
+      call place_ball(f, is_a, cen, rad, other, nd, live)
       if (.not. live) return
-      live = sum((c - oc)**2) <= (rho + orho + f%m)**2 * (1.0_wp + 1.0e-11_wp)
-   end subroutine w_ball
-
-   !> Piece (l, i, j) of body x (A when is_a, else B) for `search_within`, in B's frame; `live`
-   !> false when its bounding ball misses the world region of that body in the frame `f`. Levels
-   !> <= leaf_level: the stored sector ball, oriented box and cap-centre radius. Deeper levels: r0,
-   !> the gradient g and the Hessian's largest |eigenvalue| h at the cap centre u0
-   !> (`radius_hessian`; x0 = r0 u0, normal n0 along r0 u0 - g). With alpha the cap's
-   !> half-angle, T the certified bound of |d3r/ds3|, G = |g| + h alpha + T alpha^2/2 >= |dr/ds|
-   !> and rhi >= r over the cap (Taylor along the great-circle arcs from u0), every surface point
-   !> of the piece is within (rhi + G) alpha of x0 (arc length times the largest |dx/ds|) and within
-   !> [((h + r0) r0 + 2 |g|^2) / |r0 u0 - g|] alpha^2/2 + (T + 3 (h + T alpha) + 3 G + rhi) alpha^3/6
-   !> of the tangent plane at x0 (the first derivative of n0 . (x - x0) vanishes at x0; the
-   !> second at x0 and the third along the arc are bounded so): a thin box about x0.
-   pure subroutine w_node(x, f, is_a, l, i, j, plo, phi, nd, live)
-      type(contact_body_type), intent(in) :: x
-      type(w_frame_type), intent(in) :: f
-      logical, intent(in) :: is_a
-      integer, intent(in) :: l, i, j
-      real(wp), intent(in) :: plo, phi
-      type(w_node_type), intent(out) :: nd
-      logical, intent(out) :: live
-      real(wp) :: dir(3), cosa, sina, rlo, rhi, cen(3), rad, r0, rs, g(3), alpha, gl, w, lat, wn, nrm(3), t1(3), &
-                  t2(3), th0, th1, ph0, ph1, be(3, 3), bh(3), hm, gn, hl, nn
-      integer :: k
       if (l <= leaf_level) then
-         call patch_data(x, l, i, j, plo, phi, dir, cosa, sina, rlo, rhi, cen, rad, r0)
-         k = patch_index(x, l, i, j)
+         dir = x%dir(:, k)
+         rlo = x%rlo(k)
+         rhi = x%rhi(k)
          rs = x%node(nd_rc, k)
       else
-         if (l <= stored_level) then
-            call patch_geometry(x, l, i, j, dir, cosa, sina)
-            call patch_bounds(x, l, i, j, rlo, rhi)
-         else
-            call patch_rect(l, i, j, th0, th1, ph0, ph1)
-            call patch_cap(th0, th1, ph0, ph1, dir, cosa, sina)
-            rlo = plo
-            rhi = phi
-         end if
-         call radius_hessian(x%shape, dir, r0, g, hm)
+         call x%shape%radius_hessian(dir, r0, g, hm)
          rs = r0
          alpha = atan2(sina, cosa)
          gn = norm2(g)
          ! Taylor bounds along the great-circle arcs from the cap centre (third derivative <= T)
          w = (gn * alpha + hm * alpha**2 * 0.5_wp + x%third * alpha**3 / 6.0_wp) * (1.0_wp + 1.0e-9_wp) &
              + 1.0e-12_wp * x%r_max
-         rlo = max(rlo, plo, r0 - w)
-         rhi = min(rhi, phi, r0 + w)
+         rlo = max(rlo, r0 - w)
+         rhi = min(rhi, r0 + w)
          hl = hm + x%third * alpha
          gl = (gn + hm * alpha + x%third * alpha**2 * 0.5_wp) * (1.0_wp + 1.0e-9_wp)
          lat = (rhi + gl) * alpha * (1.0_wp + 1.0e-9_wp)
@@ -809,8 +773,6 @@ contains
          wn = (((hm + r0) * r0 + 2.0_wp * gn**2) / nn * alpha**2 * 0.5_wp &
                + (x%third + 3.0_wp * hl + 3.0_wp * gl + rhi) * alpha**3 / 6.0_wp) * (1.0_wp + 1.0e-9_wp) &
               + 1.0e-12_wp * (lat + x%r_max)
-         cen = r0 * dir
-         rad = lat
          nrm = r0 * dir - g
          nrm = nrm / norm2(nrm)
          if (abs(nrm(1)) < 0.6_wp) then
@@ -824,42 +786,32 @@ contains
          be(:, 2) = t2
          be(:, 3) = nrm
          bh = [lat, lat, wn]
+         ! the thin box's ball about x0 replaces the sector ball
+         call place_ball(f, is_a, r0 * dir, lat, other, nd, live)
+         if (.not. live) return
       end if
-      if (is_a) then
-         live = ball_in_box(f%pab%cw + matmul(f%pab%rw, cen), rad * f%wsa * (1.0_wp + 1.0e-12_wp), f%alo, f%ahi)
-      else
-         live = ball_in_box(f%pba%cw + matmul(f%pba%rw, cen), rad * f%wsb * (1.0_wp + 1.0e-12_wp), f%blo, f%bhi)
-      end if
-      if (.not. live) return
       nd%l = l
       nd%i = i
       nd%j = j
       nd%rlo = rlo
       nd%rhi = rhi
       nd%sample = .true.
-      nd%box = .true.
       if (is_a) then
-         nd%c = matmul(f%pab%m, cen) + f%pab%t
-         nd%rho = f%pab%k * rad * (1.0_wp + 1.0e-12_wp)
          nd%p = matmul(f%pab%m, rs * dir) + f%pab%t
       else
-         nd%c = cen
-         nd%rho = rad
          nd%p = rs * dir
       end if
       if (l > leaf_level) then
-         ! the thin box about the cap-centre point
          if (is_a) then
             nd%bc = nd%c
             nd%be = matmul(f%rot, be)
             nd%bh = f%pab%k * bh
-            nd%br = nd%rho
          else
-            nd%bc = cen
+            nd%bc = nd%c
             nd%be = be
             nd%bh = bh
-            nd%br = rad
          end if
+         nd%br = nd%rho
       else if (is_a) then
          nd%bc = matmul(f%pab%m, x%node(nd_c:nd_c + 2, k)) + f%pab%t
          nd%be(:, 1) = matmul(f%rot, x%node(nd_e:nd_e + 2, k))
@@ -876,6 +828,29 @@ contains
          nd%br = x%node(nd_r, k)
       end if
    end subroutine w_node
+
+   !> A piece's ball (body-frame centre c0, radius r) into nd%c, nd%rho (B's frame) for `w_node`;
+   !> live when it meets the body's world region in the frame `f` and comes within m of the ball of
+   !> the other piece.
+   pure subroutine place_ball(f, is_a, c0, r, other, nd, live)
+      type(w_frame_type), intent(in) :: f
+      logical, intent(in) :: is_a
+      real(wp), intent(in) :: c0(3), r
+      type(w_node_type), intent(in) :: other
+      type(w_node_type), intent(inout) :: nd
+      logical, intent(out) :: live
+      if (is_a) then
+         live = ball_in_box(f%pab%cw + matmul(f%pab%rw, c0), r * f%wsa * (1.0_wp + 1.0e-12_wp), f%alo, f%ahi)
+         nd%c = matmul(f%pab%m, c0) + f%pab%t
+         nd%rho = f%pab%k * r * (1.0_wp + 1.0e-12_wp)
+      else
+         live = ball_in_box(f%pba%cw + matmul(f%pba%rw, c0), r * f%wsb * (1.0_wp + 1.0e-12_wp), f%blo, f%bhi)
+         nd%c = c0
+         nd%rho = r
+      end if
+      if (live) live = sum((nd%c - other%c)**2) <= (nd%rho + other%rho + f%m)**2 * (1.0_wp + 1.0e-11_wp)
+   end subroutine place_ball
+
 
    !> True when A's stored surface point of support-table cell c, moved towards A's centre by more
    !> than its rounding, lies inside B, or (margin m > 0, mm) closer than m to B's surface point

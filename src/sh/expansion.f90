@@ -19,7 +19,7 @@ module anm_sh_expansion
    use anm_core_kinds, only: wp
    use anm_sh_legendre, only: legendre_table_type, new_legendre_table, legendre_values, &
       & legendre_theta_derivatives, packed_size
-   use anm_sh_kernel, only: sh_sum, sh_sum_slope
+   use anm_sh_kernel, only: sh_sum, sh_sum_slope, sh_sum_surface
    implicit none
    private
 
@@ -46,6 +46,8 @@ module anm_sh_expansion
       procedure :: point
       !> r and the norm of its surface gradient along a unit direction (no allocation).
       procedure :: radius_slope
+      !> r, its surface gradient and a bound of its Hessian along a direction (no allocation).
+      procedure :: radius_hessian
       !> Mean radius a_00 / (2 sqrt(pi)).
       procedure :: mean_radius
    end type sh_expansion_type
@@ -241,6 +243,38 @@ contains
       call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
       slope = sqrt(rt**2 + rp**2) / s
    end subroutine radius_slope
+
+   !> r, its surface gradient g (tangent 3-vector: r_theta e_theta + (r_phi / sin theta) e_phi)
+   !> and hmax, the largest |eigenvalue| of its covariant Hessian on the unit sphere (so that, at
+   !> u itself, |d2r/ds2| <= hmax along every great circle through u), at the direction u (body
+   !> frame, need not be normalised, not a pole). The outward normal of the surface r(u) u there
+   !> is along r u - g. One fused evaluation (`sh_sum_surface`, the table's e_nm), no allocation.
+   !> Used by the contact distance test's thin boxes (anm_contact_overlap).
+   pure subroutine radius_hessian(self, u, r, g, hmax)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Direction, not along the z axis.
+      real(wp), intent(in) :: u(3)
+      !> r(u), gradient, largest |eigenvalue| of the Hessian.
+      real(wp), intent(out) :: r, g(3), hmax
+      real(wp) :: len, rho, ct, st, cp, sp, f(6), cot, h11, h12, h22
+      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
+      rho = sqrt(u(1)**2 + u(2)**2)
+      ct = u(3) / len
+      st = rho / len
+      cp = u(1) / rho
+      sp = u(2) / rho
+      ! r, r_t, r_p, r_tt, r_tp, r_pp (plain derivatives in theta and phi)
+      call sh_sum_surface(self%table, self%a, self%b, self%table%enm, self%nmax, ct, st, cp, sp, f)
+      r = f(1)
+      g = f(2) * [ct * cp, ct * sp, -st] + (f(3) / st) * [-sp, cp, 0.0_wp]
+      ! covariant Hessian in the frame (e_theta, e_phi)
+      cot = ct / st
+      h11 = f(4)
+      h12 = (f(5) - cot * f(3)) / st
+      h22 = f(6) / st**2 + cot * f(2)
+      hmax = abs(0.5_wp * (h11 + h22)) + sqrt((0.5_wp * (h11 - h22))**2 + h12**2)
+   end subroutine radius_hessian
 
    !> r and its angular derivatives at (theta, phi): r_theta = dr/dtheta and
    !> r_phi_sin = (dr/dphi) / sin(theta), the latter finite at the poles.

@@ -35,6 +35,10 @@ module anm_sh_legendre
       !> (2n+1)/ca(k) for n > m (0 for n = m), packed like ca: the theta-derivative factor of
       !> sh_sum_slope, divided once here rather than at every evaluation.
       real(wp), allocatable :: dq(:)
+      !> e_nm = sqrt((2n+1)(n^2-m^2)/(2n-1)) for n > m (0 for n = m), packed like ca: the
+      !> theta-derivative factor of sh_sum_surface (second derivatives at a point), computed once
+      !> here for the shells (anm_shells_surface) and `radius_hessian`.
+      real(wp), allocatable :: enm(:)
    end type legendre_table_type
 
 contains
@@ -57,7 +61,7 @@ contains
 
       table%nmax = nmax
       allocate (table%idx(0:nmax + 1), table%ca(packed_size(nmax)), table%cb(packed_size(nmax)), &
-                table%dq(packed_size(nmax)))
+                table%dq(packed_size(nmax)), table%enm(packed_size(nmax)))
       allocate (table%sect(max(1, nmax)))
       k = 1
       do m = 0, nmax
@@ -78,6 +82,8 @@ contains
             end if
             table%dq(k) = 0.0_wp
             if (n > m) table%dq(k) = (2 * n + 1) / table%ca(k)
+            table%enm(k) = 0.0_wp
+            if (n > m) table%enm(k) = sqrt((2.0_wp * rn + 1.0_wp) * (rn * rn - rm * rm) / (2.0_wp * rn - 1.0_wp))
             k = k + 1
          end do
       end do

@@ -35,8 +35,6 @@ module anm_shells_surface
    type :: shell_surface_type
       !> Particle expansion.
       type(sh_expansion_type) :: shape
-      !> e_nm = sqrt((2n+1)(n^2-m^2)/(2n-1)), packed like the Legendre table (theta derivatives).
-      real(wp), allocatable :: enm(:)
       !> Sample grid with the value tables (`plm`, `trig`) to the degree of the fit of the outer
       !> surface; the derivative tables (`dplm`, `mplm`) are not built.
       type(sh_grid_type) :: grid
@@ -67,20 +65,10 @@ contains
       !> Highest degree the grid tables must support.
       integer, intent(in) :: lmax
       real(wp), allocatable :: px(:, :), py(:, :), pz(:, :), nx(:), ny(:), nz(:), cap(:, :, :)
-      integer :: n, m, k, j, nt, np, c, c1
-      real(wp) :: rn, rm, h
+      integer :: j, nt, np, c, c1
+      real(wp) :: h
 
       surf%shape = shape
-      allocate (surf%enm(size(shape%table%ca)))
-      surf%enm = 0.0_wp
-      do m = 0, shape%nmax
-         k = shape%table%idx(m)
-         do n = m, shape%nmax
-            rn = real(n, wp)
-            rm = real(m, wp)
-            if (n > m) surf%enm(k + n - m) = sqrt((2.0_wp * rn + 1.0_wp) * (rn * rn - rm * rm) / (2.0_wp * rn - 1.0_wp))
-         end do
-      end do
       nt = ntheta
       np = 2 * ntheta
       call new_value_grid(surf%grid, nt, np, max(lmax, shape%nmax, 2))
@@ -420,7 +408,7 @@ contains
       real(wp), intent(in) :: theta, phi
       !> r, dr/dt, dr/dp, d2r/dt2, d2r/dtdp, d2r/dp2.
       real(wp), intent(out) :: f(6)
-      call sh_sum_surface(surf%shape%table, surf%shape%a, surf%shape%b, surf%enm, surf%shape%nmax, &
+      call sh_sum_surface(surf%shape%table, surf%shape%a, surf%shape%b, surf%shape%table%enm, surf%shape%nmax, &
          & cos(theta), sin(theta), cos(phi), sin(phi), f)
    end subroutine eval_surface
 
@@ -466,7 +454,7 @@ contains
       sc(:, 2) = x
       sc(:, 3) = sp
       sc(:, 4) = cp
-      call sh_sum_surface_lanes(surf%shape%table, surf%shape%a, surf%shape%b, surf%enm, surf%shape%nmax, &
+      call sh_sum_surface_lanes(surf%shape%table, surf%shape%a, surf%shape%b, surf%shape%table%enm, surf%shape%nmax, &
          & x, s, cp, sp, f)
    end subroutine eval_lanes
 
