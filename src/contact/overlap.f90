@@ -159,6 +159,8 @@ module anm_contact_overlap
    !> (`surfaces_within`) stops and reports the pair as too close (safety floors never reached in
    !> our tests, like `resolution`; the heap's bound keeps its memory below about 8 MB).
    integer, parameter :: max_within_visits = 200000, max_within_heap = 16384
+   !> Steps (each body's point moved once) of the local descent of `near_points`.
+   integer, parameter :: near_steps = 8
 
    !> A piece of a body in the distance test (`surfaces_within`): the whole body (level -1) or
    !> patch (l, i, j); its radial bounds (its own shape units, for its children); its bounding
@@ -218,9 +220,13 @@ contains
       real(wp) :: m
       m = 0.0_wp
       if (present(margin)) m = max(0.0_wp, margin)
-      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., .false., &
-                        m, e)
+      ! with a margin, the separating planes too, then the local descent (a pair near contact
+      ! otherwise goes to the distance search)
+      call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., &
+                        m > 0.0_wp, m, e)
       hit = e%status == early_overlap
+      if (e%status == early_open .and. m > 0.0_wp) &
+         hit = near_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m)
    end function overlap_early
 
    !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2 and 2b
@@ -398,6 +404,10 @@ contains
          return
       end select
       if (m > 0.0_wp) then
+         hit = .true.
+         if (proofs) then
+            if (near_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m)) return
+         end if
          hit = surfaces_within(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m, e%tol, params)
          return
       end if
@@ -514,6 +524,75 @@ contains
       call search_within(a, b, f, na, nb, visits, hit)
    end function surfaces_within
 
+
+   !> Whether a short local descent finds two surface points, one of each posed body, closer than
+   !> m (mm): from the surface points on the line of centres, each body's point in turn moves to
+   !> the surface point under the projection of the other body's point onto its tangent plane
+   !> (`surface_step`), `near_steps` times or until the distance stops falling. True only with
+   !> such a pair found, which proves the bodies closer than m (the certified distance search
+   !> would answer true too: its pieces holding those points are within m); false says nothing.
+   !> A cheap proof for pairs near contact, before `surfaces_within`.
+   pure logical function near_points(a, ca, ra, sa, b, cb, rb, sb, m) result(hit)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb, m
+      real(wp) :: u(3), pa(3), pb(3), na(3), nb(3), d, dnew, lim
+      integer :: k
+      hit = .false.
+      u = cb - ca
+      d = norm2(u)
+      if (d <= 0.0_wp) return
+      u = u / d
+      call surface_at(a, ca, ra, sa, matmul(u, ra), pa, na)
+      call surface_at(b, cb, rb, sb, -matmul(u, rb), pb, nb)
+      ! the points are the surfaces' to rounding (about 1e-15 of their size)
+      lim = m * (1.0_wp - 1.0e-9_wp)
+      d = norm2(pa - pb)
+      do k = 1, near_steps
+         if (d < lim) then
+            hit = .true.
+            return
+         end if
+         call surface_at(b, cb, rb, sb, matmul(tangent_foot(pa, pb, nb) - cb, rb), pb, nb)
+         call surface_at(a, ca, ra, sa, matmul(tangent_foot(pb, pa, na) - ca, ra), pa, na)
+         dnew = norm2(pa - pb)
+         if (dnew > d * (1.0_wp - 1.0e-3_wp)) then
+            hit = dnew < lim
+            return
+         end if
+         d = dnew
+      end do
+      hit = d < lim
+   contains
+      !> The projection of t onto the plane through p with unit normal n.
+      pure function tangent_foot(t, p, n) result(q)
+         real(wp), intent(in) :: t(3), p(3), n(3)
+         real(wp) :: q(3)
+         q = t - dot_product(t - p, n) * n
+      end function tangent_foot
+   end function near_points
+
+   !> The surface point p (world) of body x posed at (cx, rx, sx) along the body-frame direction v
+   !> (need not be normalised; moved off the z axis when within 1e-6 rad of it), and the unit
+   !> outward normal n there.
+   pure subroutine surface_at(x, cx, rx, sx, v, p, n)
+      type(contact_body_type), intent(in) :: x
+      real(wp), intent(in) :: cx(3), rx(3, 3), sx, v(3)
+      real(wp), intent(out) :: p(3), n(3)
+      real(wp) :: w(3), r, g(3), len
+      w = v
+      len = norm2(w)
+      if (len <= 0.0_wp) w = [0.0_wp, 0.0_wp, 1.0_wp]
+      w = w / max(len, tiny(1.0_wp))
+      if (len <= 0.0_wp) w = [1.0_wp, 0.0_wp, 0.0_wp]
+      if (w(1)**2 + w(2)**2 < 1.0e-12_wp) then
+         w(1) = w(1) + 1.0e-6_wp
+         w = w / norm2(w)
+      end if
+      call x%shape%radius_gradient(w, r, g)
+      p = cx + sx * matmul(rx, r * w)
+      n = matmul(rx, r * w - g)
+      n = n / norm2(n)
+   end subroutine surface_at
 
    !> A lower bound of the distance between two oriented boxes (centre, orthonormal axes as
    !> columns, half-extents): the largest separation of their projections on the line of centres

@@ -46,6 +46,8 @@ module anm_sh_expansion
       procedure :: point
       !> r and the norm of its surface gradient along a unit direction (no allocation).
       procedure :: radius_slope
+      !> r and its surface gradient (a tangent 3-vector) along a direction
+      procedure :: radius_gradient
       !> r, its surface gradient and a bound of its Hessian along a direction (no allocation).
       procedure :: radius_hessian
       !> Mean radius a_00 / (2 sqrt(pi)).
@@ -243,6 +245,28 @@ contains
       call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
       slope = sqrt(rt**2 + rp**2) / s
    end subroutine radius_slope
+
+   !> r and its surface gradient g = r_theta e_theta + (r_phi / sin theta) e_phi (a tangent
+   !> 3-vector, per radian) along the direction u (body frame, need not be normalised, not a
+   !> pole), by the fused recursion of `radius_slope`. The outward normal of the surface r(u) u
+   !> there is along r u - g.
+   pure subroutine radius_gradient(self, u, r, g)
+      !> Expansion.
+      class(sh_expansion_type), intent(in) :: self
+      !> Direction, not along the z axis.
+      real(wp), intent(in) :: u(3)
+      !> r(u) and the surface gradient.
+      real(wp), intent(out) :: r, g(3)
+      real(wp) :: rho, len, x, s, cp, sp, rt, rp
+      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
+      rho = sqrt(u(1)**2 + u(2)**2)
+      x = u(3) / len
+      s = rho / len
+      cp = u(1) / rho
+      sp = u(2) / rho
+      call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
+      g = (rt / s) * [x * cp, x * sp, -s] + (rp / s) * [-sp, cp, 0.0_wp]
+   end subroutine radius_gradient
 
    !> r, its surface gradient g (tangent 3-vector: r_theta e_theta + (r_phi / sin theta) e_phi)
    !> and hmax, the largest |eigenvalue| of its covariant Hessian on the unit sphere (so that, at
