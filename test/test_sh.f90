@@ -2,7 +2,8 @@
 !> Legendre values from 200-digit references (mpmath and the explicit polynomial agree),
 !> Unsold's theorem sum_m |Y_n^m|^2 = (2n+1)/(4 pi) to degree 200, orthonormality by quadrature,
 !> closed-form Y_1^1, Y_2^2 (the Condon-Shortley convention of the files), derivatives against
-!> finite differences, grid synthesis against point evaluation, analysis round trips, normals.
+!> finite differences, grid synthesis against point evaluation, analysis round trips, normals,
+!> the surface gradient and the Hessian bound against finite differences along great circles.
 module test_sh
    use anm_core_kinds, only: wp, pi, i8
    use anm_core_error, only: error_type
@@ -38,7 +39,8 @@ contains
               new_unittest("truncation keeps low degrees", test_truncation), &
               new_unittest("complex coefficients round trip", test_complex_round_trip), &
               new_unittest("surface normal vs cross product of tangents", test_normal), &
-              new_unittest("grid normals of an ellipsoid are exact", test_grid_normals)]
+              new_unittest("grid normals of an ellipsoid are exact", test_grid_normals), &
+              new_unittest("surface gradient and Hessian bound vs finite differences", test_gradient)]
    end subroutine collect_sh
 
    !> A random real expansion of degree nmax with mean radius 1 and decaying coefficients.
@@ -364,4 +366,49 @@ contains
       print '(a,es9.2)', "        worst normal error on the ellipsoid grid: ", worst
       call check(error, worst, 0.0_wp, "normal", thr=1.0e-6_wp)
    end subroutine test_grid_normals
+
+   !> radius_gradient and radius_hessian: r as radius_dir gives it; the gradient's component along
+   !> every tangent direction w equals the derivative of r along the great circle through u in
+   !> direction w (central differences); the Hessian bound holds the second derivative along it.
+   subroutine test_gradient(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(sh_expansion_type) :: s
+      type(rng_type) :: rng
+      real(wp) :: u(3), w(3), r, g(3), r2, g2(3), hm, h, d1, d2, worst1, worst2, worsth
+      integer :: k
+      call random_expansion(14, 17_i8, s)
+      call new_rng(rng, 31_i8, 2_i8)
+      h = 1.0e-4_wp
+      worst1 = 0.0_wp
+      worst2 = 0.0_wp
+      worsth = 0.0_wp
+      do k = 1, 200
+         u = [rng%normal(), rng%normal(), rng%normal()]
+         u = u / norm2(u)
+         w = [rng%normal(), rng%normal(), rng%normal()]
+         w = w - dot_product(w, u) * u
+         w = w / norm2(w)
+         call s%radius_gradient(u, r, g)
+         call s%radius_hessian(u, r2, g2, hm)
+         worst1 = max(worst1, abs(r - s%radius_dir(u)), abs(r2 - r), norm2(g2 - g), abs(dot_product(g, u)))
+         d1 = (s%radius_dir(arc(h)) - s%radius_dir(arc(-h))) / (2 * h)
+         d2 = (s%radius_dir(arc(h)) - 2 * s%radius_dir(u) + s%radius_dir(arc(-h))) / h**2
+         worst2 = max(worst2, abs(d1 - dot_product(g, w)) / (1.0_wp + abs(d1)))
+         worsth = max(worsth, abs(d2) - hm)
+      end do
+      print '(a,3es10.2)', "        r and gradients agree to, FD gradient error, largest |d2r/ds2| - bound: ", worst1, &
+         worst2, worsth
+      call check(error, worst1, 0.0_wp, "r and gradient of the two evaluations", thr=1.0e-10_wp)
+      if (allocated(error)) return
+      call check(error, worst2, 0.0_wp, "gradient against finite differences", thr=1.0e-6_wp)
+      if (allocated(error)) return
+      call check(error, worsth <= 1.0e-4_wp, "Hessian bound holds the second derivative along great circles")
+   contains
+      !> The point at arc length t from u along the great circle towards w.
+      pure function arc(t) result(v)
+         real(wp), intent(in) :: t
+         real(wp) :: v(3)
+         v = cos(t) * u + sin(t) * w
+      end function arc
+   end subroutine test_gradient
 end module test_sh
