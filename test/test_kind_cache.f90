@@ -12,7 +12,7 @@ module test_kind_cache
    use anm_contact_body, only: contact_body_type, new_contact_body
    use anm_config_shells, only: shell_mode
    use anm_shells_thickness, only: thickness_unit
-   use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set
+   use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, body_holder
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -78,12 +78,17 @@ contains
       call new_kind_set(ks, kinds, p, shapes, names, [0], [2], [6])
    end subroutine setup
 
-   !> Kinds 1 (level 1 of shape 1) and 4 (level 2 of shape 2).
+   !> Kinds 1 (level 1 of shape 1) and 4 (level 2 of shape 2), with their shell layers.
    subroutine build_some(ks, kinds, error)
       type(kind_set_type), intent(inout) :: ks
       type(particle_kind_type), intent(inout) :: kinds(:)
       type(error_type), allocatable, intent(out) :: error
       call ks%build(kinds, [1, 4], error)
+      if (allocated(error)) return
+      call check(error, .not. (allocated(kinds(1)%layers) .or. allocated(kinds(4)%layers)) .and. kinds(1)%gap > 0.0_wp, &
+                 "built kinds have their gap, not yet their layers")
+      if (allocated(error)) return
+      call ks%build_layers(kinds, [1, 4], error)
    end subroutine build_some
 
    !> Whether two kinds hold the same data, bit for bit.
@@ -253,10 +258,13 @@ contains
       if (allocated(error)) return
       call check(error, all(ref%supp == kinds(4)%body%supp), "the table is new_contact_body's")
       if (allocated(error)) return
-      ! kind 2: shape 2 at the other width level, the base of kind 4
+      ! kind 2: shape 2 at the other width level, sharing the bare body of kind 4 (no copy)
       call ks%build(kinds, [2], error)
       if (allocated(error)) return
-      call check(error, allocated(kinds(2)%body%supp) .and. all(kinds(2)%body%supp == kinds(4)%body%supp), &
+      call check(error, body_holder(kinds, 2) == 4 .and. .not. allocated(kinds(2)%body%node) .and. &
+                 body_holder(kinds, 4) == 4, "a kind of another width level shares its base's body")
+      if (allocated(error)) return
+      call check(error, allocated(kinds(body_holder(kinds, 2))%body%supp), &
                  "a kind built from a base with its table has the table")
       if (allocated(error)) return
       call ks%add_tables(kinds, 10001_int64, now=.true.)

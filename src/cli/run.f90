@@ -17,7 +17,7 @@ module anm_cli_run
    use anm_shapes_library, only: is_shape_file_name
    use anm_config_job, only: run_config_type, read_config
    use anm_config_shells, only: thickness_unit_keyword, shell_mode_name
-   use anm_parking_engine, only: run_parking, particle_kind_type
+   use anm_parking_engine, only: run_parking, particle_kind_type, body_holder
    use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_summary, only: write_summary, write_summary_csv_file
    use anm_io_model, only: model_type, write_model_file, read_model
@@ -400,7 +400,7 @@ contains
       nlay = cfg%shells%nlayer
       allocate (meshes(nk * (1 + nlay)))
       do k = 1, nk
-         meshes(k)%shape = kinds(k)%body%shape
+         meshes(k)%shape = kinds(body_holder(kinds, k))%body%shape
          meshes(k)%tess = cfg%output%tessellation(kinds(k)%sieve)
          meshes(k)%colour = palette(:, 1 + mod(kinds(k)%sieve - 1, 6))
          do l = 1, nlay

@@ -16,7 +16,7 @@ module anm_parking_attempts
    use anm_core_kinds, only: wp, i8
    use anm_core_random, only: rng_type, new_rng
    use anm_geometry_rotation, only: random_rotation
-   use anm_parking_kinds, only: particle_kind_type, width_levels
+   use anm_parking_kinds, only: particle_kind_type, width_levels, body_holder
    use anm_parking_void_grid, only: void_grid_type
    implicit none
    private
@@ -129,7 +129,7 @@ contains
       if (ap%void) then
          self%c = void_centre(self%rng, vg)
       else
-         self%c = random_centre(self%rng, ap, self%sc * kinds(self%k)%body%r_min)
+         self%c = random_centre(self%rng, ap, self%sc * kinds(body_holder(kinds, self%k))%body%r_min)
       end if
       self%count = self%count + 1
    end subroutine next

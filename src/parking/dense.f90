@@ -163,7 +163,7 @@ contains
             ! the missing volume (counted at the particles' target sizes) at that size
             a2%min_width = f * ap(s)%min_width
             a2%max_width = f * ap(s)%max_width
-            full = sieve_totals(pk, s, rp, tsc)
+            full = sieve_totals(pk, s, tsc)
             request = (target - full%vol) * f**3
             np0 = pk%np
             if (pk%ndead > 0) call pk%compact()
@@ -175,21 +175,21 @@ contains
                   call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
                end do
             end if
-            full = sieve_totals(pk, s, rp, tsc)
+            full = sieve_totals(pk, s, tsc)
             if (grow .and. close_enough(full, target)) then
                ! enough particles once grown: grow them; those that cannot grow go (next round)
                call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
                call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
-               full = sieve_totals(pk, s, rp, tsc)
+               full = sieve_totals(pk, s, tsc)
             end if
-            res = sieve_totals(pk, s, rp)
+            res = sieve_totals(pk, s)
             res%reached = close_enough(full, target)
             call round_line(rp, ms, s, round, res, full, target)
          end do
          if (grow) then
             call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
             call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
-            res = sieve_totals(pk, s, rp)
+            res = sieve_totals(pk, s)
             res%reached = close_enough(res, target)
          end if
          result(s) = res
@@ -258,12 +258,11 @@ contains
       if (removed) call pk%compact()
    end subroutine settle_growth
 
-   !> Particles, volume and shell fraction of sieve s as they are in the packing, or with every
-   !> particle at its target scale `tsc`.
-   pure function sieve_totals(pk, s, rp, tsc) result(res)
+   !> Particles and volume of sieve s as they are in the packing, or with every particle at its
+   !> target scale `tsc` (the shell fractions are summed at the end of the run: anm_parking_engine).
+   pure function sieve_totals(pk, s, tsc) result(res)
       type(packing_type), intent(in) :: pk
       integer, intent(in) :: s
-      type(rsa_params_type), intent(in) :: rp
       real(wp), intent(in), optional :: tsc(:)
       type(sieve_result_type) :: res
       integer :: i, k
@@ -275,9 +274,6 @@ contains
          if (present(tsc)) sc = tsc(i)
          res%count = res%count + 1
          res%vol = res%vol + sc**3 * pk%kinds(k)%volume
-         if (rp%nlayer > 0) res%shell_fraction = res%shell_fraction &
-                                                 + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) &
-                                                            - pk%kinds(k)%volume) / rp%vbox
       end do
    end function sieve_totals
 

@@ -22,7 +22,7 @@ module anm_parking_engine
    use anm_config_parking, only: parking_strategy, last_particle, sieve_carry
    use anm_shells_thickness, only: thickness_to_mm, thickness_unit
    use anm_parking_kinds, only: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, &
-      & cache_environment, kind_bytes, body_bytes
+      & cache_environment, kind_bytes, body_bytes, body_holder
    use anm_parking_packing, only: packing_type, packing_params_type, new_packing
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
@@ -33,7 +33,7 @@ module anm_parking_engine
    implicit none
    private
 
-   public :: run_parking, particle_kind_type, width_levels, parking_strategy
+   public :: run_parking, particle_kind_type, width_levels, parking_strategy, body_holder
 
 contains
 
@@ -112,19 +112,61 @@ contains
          call park_rsa(pk, ks, ap, rp, cfg%sieves%target_fraction(:cfg%sieves%nsieve), result, run, error)
       end select
       if (allocated(error)) return
-      call system_clock(t1)
-      call cache_line(ks, pk%kinds, progress_unit)
-      ! the VRML output draws every kind
-      if (cfg%output%vrml) then
+      ! the shell layers of the kinds that hold particles (the VRML output draws every kind), and
+      ! the shell fractions they give
+      if (cfg%shells%nlayer > 0) then
+         if (cfg%output%vrml) then
+            call ks%build_layers(pk%kinds, [(s, s=1, size(pk%kinds))], error)
+         else
+            call ks%build_layers(pk%kinds, kinds_in_use(pk), error)
+         end if
+         if (allocated(error)) return
+         call add_shell_fractions(pk, rp, result)
+      else if (cfg%output%vrml) then
          call ks%build(pk%kinds, [(s, s=1, size(pk%kinds))], error)
          if (allocated(error)) return
       end if
+      call system_clock(t1)
+      call cache_line(ks, pk%kinds, progress_unit)
       model%attempts = run%attempts
       model%wall_time = real(t1 - run%t0, wp) / run%rate
       call fill_model(cfg, pk, result, model)
       call take_int1(pk%kind_of, pk%np, kind_of)
       call move_alloc(pk%kinds, kinds)
    end subroutine run_parking
+
+   !> The kinds of the parked particles, each once, in increasing order.
+   pure function kinds_in_use(pk) result(list)
+      type(packing_type), intent(in) :: pk
+      integer, allocatable :: list(:)
+      logical, allocatable :: used(:)
+      integer :: i, k
+      allocate (used(size(pk%kinds)))
+      used = .false.
+      do i = 1, pk%np
+         used(pk%kind_of(i)) = .true.
+      end do
+      list = pack([(k, k=1, size(pk%kinds))], used)
+   end function kinds_in_use
+
+   !> The shell volume fraction of each sieve (the sum of its particles' shell volumes over the
+   !> box volume, not corrected for overlaps), from the built layers, particle by particle in
+   !> the order they were parked.
+   pure subroutine add_shell_fractions(pk, rp, result)
+      type(packing_type), intent(in) :: pk
+      type(rsa_params_type), intent(in) :: rp
+      type(sieve_result_type), intent(inout) :: result(:)
+      integer :: i, k, s
+      real(wp) :: sc
+      result%shell_fraction = 0.0_wp
+      do i = 1, pk%np
+         k = pk%kind_of(i)
+         s = pk%sieve(i)
+         sc = pk%scale(i)
+         result(s)%shell_fraction = result(s)%shell_fraction &
+                                    + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) - pk%kinds(k)%volume) / rp%vbox
+      end do
+   end subroutine add_shell_fractions
 
    !> Load the shapes of every sieve (each distinct source once) into the model: sieve s uses
    !> shapes first_shape(s) + 1 .. first_shape(s) + nshape(s).
@@ -183,21 +225,26 @@ contains
       type(particle_kind_type), intent(in) :: kinds(:)
       integer, intent(in), optional :: unit
       integer(i8) :: total, bare
-      integer :: k, n
+      integer :: k, n, nb
       if (.not. present(unit)) return
       if (unit < 0) return
       if (ks%p%nlayer > 0) then
          total = 0
          bare = 0
          n = count(ks%built)
+         nb = 0
          do k = 1, size(kinds)
             if (.not. ks%built(k)) cycle
             total = total + kind_bytes(kinds(k))
+            if (kinds(k)%body_kind /= k) cycle
+            nb = nb + 1
             bare = bare + body_bytes(kinds(k)%body)
          end do
-         write (unit, '(a,i0,a,i0,a,f0.2,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
-            real(total, wp) / max(1, n) / 2.0_wp**20, " MB per kind (contact body ", &
-            real(bare, wp) / max(1, n) / 2.0_wp**20, " MB), ", real(total, wp) / 2.0_wp**20, " MB in all"
+         ! the bare bodies are shared by the width levels (and sieves) of their (shape, order)
+         write (unit, '(a,i0,a,i0,a,i0,a,i0,a,f0.2,a,f0.1,a)') "kinds: ", n, " of ", size(kinds), " built, ", &
+            nint(real(total - bare, wp) / max(1, n) / 2.0_wp**10), " kB per kind beside ", nb, &
+            " shared contact bodies of ", real(bare, wp) / max(1, nb) / 2.0_wp**20, " MB, ", &
+            real(total, wp) / 2.0_wp**20, " MB in all"
       end if
       write (unit, '(a,i0,a)') "kinds: support tables built for ", ks%tables_built, " contact bodies"
       if (allocated(ks%exchange)) then

@@ -32,7 +32,7 @@ module anm_parking_kinds
    private
 
    public :: particle_kind_type, kind_params_type, kind_set_type, new_kind_set, width_levels, cache_environment, kind_bytes, &
-      & body_bytes, kind_exchange_type
+      & body_bytes, kind_exchange_type, body_holder
 
    !> Discrete widths per sieve when shell thickness is given in mm.
    integer, parameter :: width_levels = 8
@@ -55,13 +55,19 @@ module anm_parking_kinds
       integer :: level = 0
       !> Geometry at the order used (shape units).
       real(wp) :: width = 0.0_wp, length = 0.0_wp, volume = 0.0_wp
-      !> Bare particle (the only contact body: shells are tested as a gap around it).
+      !> Bare particle (the only contact body: shells are tested as a gap around it), held by
+      !> the kind `body_kind` only: the first kind built of a (shape, order); the others (width
+      !> levels, sieves of the same source) share it and leave theirs empty.
       type(contact_body_type) :: body
+      !> The kind whose `body` is this kind's bare body (0: the kind itself):
+      !> `kinds(body_holder(kinds, k))%body`.
+      integer :: body_kind = 0
       !> Thickness of the outermost shell (shape units) that the packing keeps as a gap around
       !> the bare body (modes 'exclude' and 'shell_overlap'; 0 otherwise): the distance test of
       !> `bodies_overlap` with a margin.
       real(wp) :: gap = 0.0_wp
-      !> Outer surfaces of the layers (shape units) and the volume inside each.
+      !> Outer surfaces of the layers (shape units) and the volume inside each: built only when
+      !> asked for (`build_layers`: the kinds that hold particles, at the end of the parking).
       type(sh_expansion_type), allocatable :: layers(:)
       !> Volume inside each layer's outer surface (shape units).
       real(wp), allocatable :: layer_volume(:)
@@ -133,6 +139,8 @@ module anm_parking_kinds
       integer, allocatable :: base(:)
       !> Kinds built so far; kinds whose geometry and bare body are built (`base`s).
       logical, allocatable :: built(:), base_built(:)
+      !> Kinds whose shell layers are built (`build_layers`).
+      logical, allocatable :: layered(:)
       !> The run's shapes and names (the model's).
       type(sh_expansion_type), allocatable :: shapes(:)
       type(string_type), allocatable :: names(:)
@@ -149,6 +157,8 @@ module anm_parking_kinds
    contains
       !> Build the kinds of a list that are not built yet.
       procedure :: build
+      !> Build the shell layers of a list of kinds.
+      procedure :: build_layers => build_kind_layers
       !> Support tables for the built kinds' contact bodies when the run's use pays for them.
       procedure :: add_tables
    end type kind_set_type
@@ -203,8 +213,9 @@ contains
       end do
       ! a kind equal to an earlier one (same shape and order, and with shells in mm the same width:
       ! e.g. two sieves of one source) is built once and copied (build)
-      allocate (ks%same(n), ks%built(n), ks%base(n), ks%base_built(n))
+      allocate (ks%same(n), ks%built(n), ks%base(n), ks%base_built(n), ks%layered(n))
       ks%built = .false.
+      ks%layered = .false.
       ks%base_built = .false.
       ks%base = [(i, i=1, n)]
       do i = 1, n
@@ -267,6 +278,9 @@ contains
             integer, allocatable :: bases(:), fresh(:)
             logical, allocatable :: hit(:)
             bases = pack(todo, self%base(todo) == todo .and. .not. self%base_built(todo))
+            do i = 1, size(bases)
+               kinds(bases(i))%body_kind = bases(i)
+            end do
             if (size(bases) > 0) then
                ! from the cache where it has them, the others built in parallel and stored
                allocate (hit(size(bases)))
@@ -287,27 +301,18 @@ contains
          do i = 1, size(todo)
             k = todo(i)
             if (self%base(k) /= k) then
-               call copy_base(kinds(self%base(k)), kinds(k))
+               j = body_holder(kinds, self%base(k))
+               call copy_base(kinds(self%base(k)), kinds(k), j, kinds(j)%body)
                self%base_built(k) = .true.
             end if
          end do
+         ! shells: the gap the packing keeps (cheap); their layers when asked for (build_layers)
          if (self%p%nlayer > 0) then
-            block
-               integer, allocatable :: fresh(:)
-               logical, allocatable :: hit(:)
-               allocate (hit(size(todo)))
-               hit = .false.
-               do i = 1, size(todo)
-                  if (self%cache%on) call load_shells(self, kinds(todo(i)), hit(i))
-               end do
-               fresh = pack(todo, .not. hit)
-               call build_shared(self, kinds, fresh, .false., error)
-               if (allocated(error)) return
-               self%shells_built = self%shells_built + size(fresh)
-               do i = 1, size(fresh)
-                  if (self%cache%on) call store_shells(self, kinds(fresh(i)))
-               end do
-            end block
+            do i = 1, size(todo)
+               k = todo(i)
+               j = body_holder(kinds, k)
+               call shell_radii(self%p, kinds(k), kinds(j)%body)
+            end do
          end if
          self%built(todo) = .true.
       end if
@@ -316,12 +321,73 @@ contains
          if (self%built(k)) cycle
          sieve = kinds(k)%sieve
          level = kinds(k)%level
-         kinds(k) = kinds(self%same(k))
+         call copy_kind(kinds(self%same(k)), kinds(k), body_holder(kinds, self%same(k)))
          kinds(k)%sieve = sieve
          kinds(k)%level = level
          self%built(k) = .true.
       end do
    end subroutine build
+
+   !> Build the shell layers of the kinds `list` (built first where they are not) that have none
+   !> yet: from the cache where it has them, the others in parallel (shared between processes
+   !> with an exchange) and stored; a kind equal to an earlier one (`same`) gets a copy. Called
+   !> collectively with the same list on every process. Nothing without shells.
+   subroutine build_kind_layers(self, kinds, list, error)
+      !> Bookkeeping.
+      class(kind_set_type), intent(inout) :: self
+      !> Kinds.
+      type(particle_kind_type), intent(inout) :: kinds(:)
+      !> Kinds wanted.
+      integer, intent(in) :: list(:)
+      !> Error of the first kind that failed.
+      type(error_type), allocatable, intent(out) :: error
+      logical, allocatable :: want(:), hit(:)
+      integer, allocatable :: todo(:), fresh(:)
+      integer :: i, k, o
+      if (self%p%nlayer == 0) return
+      call self%build(kinds, list, error)
+      if (allocated(error)) return
+      allocate (want(size(kinds)))
+      want = .false.
+      do i = 1, size(list)
+         want(self%same(list(i))) = .true.
+      end do
+      want = want .and. .not. self%layered
+      todo = pack([(k, k=1, size(kinds))], want)
+      if (size(todo) > 0) then
+         allocate (hit(size(todo)))
+         hit = .false.
+         do i = 1, size(todo)
+            if (self%cache%on) call load_shells(self, kinds(todo(i)), hit(i))
+         end do
+         fresh = pack(todo, .not. hit)
+         call build_shared(self, kinds, fresh, .false., error)
+         if (allocated(error)) return
+         self%shells_built = self%shells_built + size(fresh)
+         do i = 1, size(fresh)
+            if (self%cache%on) call store_shells(self, kinds(fresh(i)))
+         end do
+         self%layered(todo) = .true.
+      end if
+      do i = 1, size(list)
+         k = list(i)
+         if (self%layered(k)) cycle
+         o = self%same(k)
+         kinds(k)%layers = kinds(o)%layers
+         kinds(k)%layer_volume = kinds(o)%layer_volume
+         self%layered(k) = .true.
+      end do
+   end subroutine build_kind_layers
+
+   !> Index of the kind whose `body` is kind k's bare body (`body_kind`; k itself when 0).
+   pure integer function body_holder(kinds, k) result(h)
+      !> Kinds.
+      type(particle_kind_type), intent(in) :: kinds(:)
+      !> Kind.
+      integer, intent(in) :: k
+      h = kinds(k)%body_kind
+      if (h == 0) h = k
+   end function body_holder
 
    !> Support tables (anm_contact_body, `add_support_table`) for the contact bodies of the built
    !> kinds that have patch arrays and no table yet, built in parallel, once the run has made
@@ -343,21 +409,25 @@ contains
       logical :: force
       force = .false.
       if (present(now)) force = now
-      ! counted without allocating: this runs after every batch
+      ! counted without allocating: this runs after every batch. Counted per built kind whose
+      ! (shared) body has no table, as when each kind had its own body: the width levels of shells
+      ! in mm spread a job's few particles over many kinds, whose tables do not pay (measured:
+      ! 24 tables cost the shells-in-mm job about 0.8 s CPU, a fifth of it, and saved nothing)
       n = 0
       do k = 1, size(kinds)
          if (.not. self%built(k)) cycle
-         if (needs_table(kinds(k)%body)) n = n + 1
+         if (needs_table(kinds(body_holder(kinds, k))%body)) n = n + 1
       end do
       if (n == 0) return
       if (.not. force .and. attempts - self%attempts_tabled < int(attempts_per_table, int64) * n) return
-      todo = pack([(k, k=1, size(kinds))], self%built)
+      ! the holders of the bodies (the others' bodies are empty)
+      todo = pack([(k, k=1, size(kinds))], [(self%built(k) .and. needs_table(kinds(k)%body), k=1, size(kinds))])
       !$omp parallel do default(none) shared(kinds, todo) private(i) schedule(dynamic)
       do i = 1, size(todo)
          call add_support_table(kinds(todo(i))%body)
       end do
       !$omp end parallel do
-      self%tables_built = self%tables_built + n
+      self%tables_built = self%tables_built + size(todo)
       self%attempts_tabled = attempts
    end subroutine add_tables
 
@@ -506,9 +576,7 @@ contains
       kd%length = g(2)
       kd%volume = g(3)
       kd%body%shape = sh_truncate(ks%shapes(kd%shape), kd%order)
-      kd%r_out = kd%body%r_max
-      kd%r_in_query = kd%body%r_min
-      kd%r_in_parked = kd%body%r_min
+      call body_radii(kd)
    end subroutine decode_base
 
    !> Store a kind's geometry and bare body.
@@ -563,7 +631,6 @@ contains
       ok = .true.
       call move_alloc(layers, kd%layers)
       call move_alloc(vol, kd%layer_volume)
-      call shell_radii(ks%p, kd)
    end subroutine decode_shells
 
    !> Store a kind's shells.
@@ -596,18 +663,43 @@ contains
       ks%cache%rejected = ks%cache%rejected + 1
    end subroutine reject
 
-   !> A kind's geometry and bare body from its base (another width level of its shape and order).
-   subroutine copy_base(from, kd)
+   !> A kind's geometry from its base (another width level of its shape and order), whose bare
+   !> body (held by kind `holder`: `body`) it shares.
+   subroutine copy_base(from, kd, holder, body)
       type(particle_kind_type), intent(in) :: from
       type(particle_kind_type), intent(inout) :: kd
+      integer, intent(in) :: holder
+      type(contact_body_type), intent(in) :: body
       kd%width = from%width
       kd%length = from%length
       kd%volume = from%volume
-      kd%body = from%body
-      kd%r_out = from%body%r_max
-      kd%r_in_query = from%body%r_min
-      kd%r_in_parked = from%body%r_min
+      kd%body_kind = holder
+      kd%r_out = body%r_max
+      kd%r_in_query = body%r_min
+      kd%r_in_parked = body%r_min
    end subroutine copy_base
+
+   !> A kind equal to an earlier one (`same`): everything but the bare body, which it shares
+   !> (held by kind `holder`), and the layers, which `build_layers` copies when asked for.
+   subroutine copy_kind(from, kd, holder)
+      type(particle_kind_type), intent(in) :: from
+      type(particle_kind_type), intent(inout) :: kd
+      integer, intent(in) :: holder
+      type(contact_body_type) :: empty
+      kd%shape = from%shape
+      kd%sieve = from%sieve
+      kd%order = from%order
+      kd%level = from%level
+      kd%width = from%width
+      kd%length = from%length
+      kd%volume = from%volume
+      kd%body = empty
+      kd%body_kind = holder
+      kd%gap = from%gap
+      kd%r_out = from%r_out
+      kd%r_in_query = from%r_in_query
+      kd%r_in_parked = from%r_in_parked
+   end subroutine copy_kind
 
    !> Build kinds(todo) in parallel (each kind by one thread; failures in failed/errs): their
    !> geometry and bare body (`bases`) or, with these in place, their shells.
@@ -663,10 +755,16 @@ contains
       kd%width = g%width
       kd%length = g%length
       kd%volume = g%volume
+      call body_radii(kd)
+   end subroutine prepare_base
+
+   !> The overlap radii (without shells) of a kind holding its bare body.
+   subroutine body_radii(kd)
+      type(particle_kind_type), intent(inout) :: kd
       kd%r_out = kd%body%r_max
       kd%r_in_query = kd%body%r_min
       kd%r_in_parked = kd%body%r_min
-   end subroutine prepare_base
+   end subroutine body_radii
 
    !> Thicknesses of a kind's layers in shape units (with shells in mm at its width level).
    function shell_thickness(p, kd) result(t)
@@ -705,25 +803,26 @@ contains
       do k = 1, size(t)
          kd%layer_volume(k) = reports(k)%outer_volume
       end do
-      ! overlapping shells do not take part in the parking; the others are a gap kept around the
-      ! bare body by the distance test (no contact body of their own)
-      call shell_radii(p, kd)
    end subroutine prepare_shells
 
-   !> The gap and overlap radii of a kind with shells.
-   subroutine shell_radii(p, kd)
+   !> The gap and overlap radii of a kind with shells (its bare body: `body`). Overlapping shells
+   !> do not take part in the parking; the others are a gap kept around the bare body by the
+   !> distance test (no contact body of their own).
+   subroutine shell_radii(p, kd, body)
       type(kind_params_type), intent(in) :: p
       type(particle_kind_type), intent(inout) :: kd
+      type(contact_body_type), intent(in) :: body
       real(wp), allocatable :: t(:)
       if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) return
       t = shell_thickness(p, kd)
       kd%gap = maxval(t)
-      kd%r_out = kd%body%r_max + kd%gap
-      kd%r_in_query = kd%body%r_min + kd%gap
-      if (p%mode == shell_mode%exclude) kd%r_in_parked = kd%body%r_min + kd%gap
+      kd%r_out = body%r_max + kd%gap
+      kd%r_in_query = body%r_min + kd%gap
+      if (p%mode == shell_mode%exclude) kd%r_in_parked = body%r_min + kd%gap
    end subroutine shell_radii
 
-   !> Memory held by a kind (bytes): its bodies, layers and the scalars.
+   !> Memory held by a kind (bytes): its bare body (when it holds one: `body_kind`), layers and
+   !> the scalars.
    pure integer(int64) function kind_bytes(kd) result(n)
       !> Kind.
       type(particle_kind_type), intent(in) :: kd

@@ -30,7 +30,7 @@ module anm_parking_packing
    use anm_contact_overlap, only: contact_params_type, bodies_overlap, overlap_early, body_crosses_walls
    use anm_config_shells, only: shell_mode
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
-   use anm_parking_kinds, only: particle_kind_type
+   use anm_parking_kinds, only: particle_kind_type, body_holder
    implicit none
    private
 
@@ -451,12 +451,12 @@ contains
       if (present(since)) jmin = since
       jskip = 0
       if (present(exclude)) jskip = exclude
-      associate (p => self%p, kq => self%kinds(kn))
+      associate (p => self%p, kq => self%kinds(kn), bq => self%kinds(body_holder(self%kinds, kn))%body)
          if (.not. p%periodic .and. jmin == 0) then
             if (p%nlayer > 0 .and. p%mode == shell_mode%exclude) then
-               if (body_crosses_walls(kq%body, x, rr, sc, p%box, margin=sc * kq%gap)) return
+               if (body_crosses_walls(bq, x, rr, sc, p%box, margin=sc * kq%gap)) return
             else
-               if (body_crosses_walls(kq%body, x, rr, sc, p%box)) return
+               if (body_crosses_walls(bq, x, rr, sc, p%box)) return
             end if
          end if
          if (self%ndead == 0 .and. jskip == 0) then
@@ -472,10 +472,10 @@ contains
          ! an overlap the first stages prove, with any candidate, before any pair near contact is
          ! certified (the answer is the same: the full test would report that overlap too)
          if (ncand >= 2) then
-            if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.true.)) return
+            if (any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.true.)) return
          end if
          ! the full tests (without the proofs just run, when they were)
-         if (any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false., &
+         if (any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false., &
                          proofs_done=ncand >= 2)) return
       end associate
       ok = .true.
@@ -486,10 +486,12 @@ contains
    !> shell mode tests: by the full contact test, or (early) by its first stages alone
    !> (`overlap_early`: true only where the full test is true; false says nothing). With
    !> proofs_done the full tests skip the early overlap proofs (the caller ran them on these pairs).
-   pure logical function any_overlap(self, kq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, proofs_done) &
-      result(hit)
+   pure logical function any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, &
+                                     proofs_done) result(hit)
       type(packing_type), intent(in) :: self
       type(particle_kind_type), intent(in) :: kq
+      !> The candidate's bare body (its kind's shared one).
+      type(contact_body_type), intent(in) :: bq
       real(wp), intent(in) :: x(3), rr(3, 3), sc
       type(fit_scratch_type), intent(in) :: scratch
       integer, intent(in) :: ncand, order(:), jskip
@@ -510,16 +512,17 @@ contains
                if (all(scratch%shift(:, i) == 0.0_wp)) cycle
             end if
             xj = self%center(:, j) + scratch%shift(:, i)
-            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j))
+            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j), &
+                       bj => self%kinds(body_holder(self%kinds, self%kind_of(j)))%body)
                if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, 0.0_wp)) return
+                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, 0.0_wp)) return
                else if (p%mode == shell_mode%exclude) then
                   ! both shells: the bare bodies keep the sum of their thicknesses apart
-                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, &
+                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, &
                                    sc * kq%gap + sj * kj%gap)) return
                else
                   ! each shell against the other bare body: the larger thickness apart
-                  if (pair_overlap(early, done, kq%body, x, rr, sc, kj%body, xj, rj, sj, p%contact, &
+                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, &
                                    max(sc * kq%gap, sj * kj%gap))) return
                end if
             end associate

@@ -19,7 +19,7 @@ module anm_parking_rsa
    use anm_core_kinds, only: wp, i8, pi
    use anm_core_error, only: error_type
    use anm_core_strings, only: to_string
-   use anm_parking_kinds, only: kind_set_type
+   use anm_parking_kinds, only: kind_set_type, body_holder
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_attempts, only: attempt_params_type, first_kind_of
    use anm_parking_scheduler, only: batch_type, next_batch, phase1_distributor_type
@@ -275,9 +275,6 @@ contains
             call bt%accept(b)
             st%res%vol = vol_with
             st%res%count = st%res%count + 1
-            if (rp%nlayer > 0) st%res%shell_fraction = st%res%shell_fraction &
-                                                       + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) - pk%kinds(k)%volume) &
-                                                       / rp%vbox
             if (st%res%vol >= st%target) exit
          end associate
       end do
@@ -353,7 +350,7 @@ contains
       ! inscribed radius of the smallest particle this sieve can make
       r_in = huge(1.0_wp)
       do k = ap%first_kind, ap%first_kind + ap%nkind - 1
-         r_in = min(r_in, pk%kinds(k)%body%r_min * ap%min_width / pk%kinds(k)%width)
+         r_in = min(r_in, pk%kinds(body_holder(pk%kinds, k))%body%r_min * ap%min_width / pk%kinds(k)%width)
       end do
       call new_void_grid(vg, pk%p%box, pk%p%periodic, r_in, 2**24)
       do j = 1, pk%np
@@ -367,9 +364,9 @@ contains
       type(void_grid_type), intent(inout) :: vg
       type(packing_type), intent(in) :: pk
       integer, intent(in) :: j
-      associate (kj => pk%kinds(pk%kind_of(j)))
-         call vg%block_particle(kj%body%shape, pk%center(:, j), pk%rot(:, :, j), pk%scale(j), pk%scale(j) * kj%body%r_min, &
-                                pk%rho(j), body=kj%body)
+      associate (bj => pk%kinds(body_holder(pk%kinds, pk%kind_of(j)))%body)
+         call vg%block_particle(bj%shape, pk%center(:, j), pk%rot(:, :, j), pk%scale(j), pk%scale(j) * bj%r_min, &
+                                pk%rho(j), body=bj)
       end associate
    end subroutine block_particle
 
