@@ -481,7 +481,7 @@ def shellsmm_section(rep: Report, anm: str, tmp: Path) -> None:
     ratio = jw.run.cpu / jn.run.cpu
     # like with like: both jobs read their kinds from a warm cache
     ratio_w = jww.run.cpu / jnw.run.cpu
-    rep.target("shells in mm: CPU with / without shells, no cache", f"{jw.run.cpu:.0f} s / {jn.run.cpu:.0f} s = "
+    rep.target("shells in mm: CPU with / without shells, no cache", f"{jw.run.cpu:.1f} s / {jn.run.cpu:.1f} s = "
                f"{ratio:.1f}", "<= 2", ratio <= 2)
     rep.target("shells in mm: CPU with / without shells, both with a warm kind cache",
                f"{jww.run.cpu:.1f} s / {jnw.run.cpu:.1f} s = {ratio_w:.1f}", "<= 2", ratio_w <= 2)
