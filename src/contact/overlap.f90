@@ -220,13 +220,17 @@ contains
       real(wp) :: m
       m = 0.0_wp
       if (present(margin)) m = max(0.0_wp, margin)
-      ! with a margin, the separating planes too, then the local descent (a pair near contact
-      ! otherwise goes to the distance search)
+      ! with a margin or in certified mode, the separating planes too, then a local descent (a
+      ! pair near contact otherwise goes to the box traversal or the distance search)
       call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., &
-                        m > 0.0_wp, m, e)
+                        m > 0.0_wp .or. params%certified, m, e)
       hit = e%status == early_overlap
-      if (e%status == early_open .and. m > 0.0_wp) &
+      if (e%status /= early_open) return
+      if (m > 0.0_wp) then
          hit = near_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m)
+      else if (params%certified .and. params%method /= contact_method%newton_raphson) then
+         hit = inside_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b)
+      end if
    end function overlap_early
 
    !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2 and 2b
@@ -415,6 +419,12 @@ contains
          hit = nr_overlap(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params)
          return
       end if
+      ! stage 2d without a margin (certified mode, which reports every true overlap): a surface
+      ! point of one body found inside the other by a short descent
+      if (proofs .and. params%certified) then
+         hit = .true.
+         if (inside_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b)) return
+      end if
       tol = e%tol
       ! stage 3: extent boxes and the EOB
       call eob_box(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params%certified, &
@@ -570,6 +580,81 @@ contains
          q = t - dot_product(t - p, n) * n
       end function tangent_foot
    end function near_points
+
+   !> Whether a short descent finds a surface point of one posed body strictly inside the other
+   !> (`dives_into`, A's point into B, then B's into A). True only with such a point found, which
+   !> proves an overlap (certified mode reports it too); false says nothing.
+   pure logical function inside_points(a, ca, ra, sa, b, cb, rb, sb) result(hit)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      hit = dives_into(a, ca, ra, sa, b, cb, rb, sb)
+      if (.not. hit) hit = dives_into(b, cb, rb, sb, a, ca, ra, sa)
+   end function inside_points
+
+   !> A's surface point on the line of centres moved downhill of its radial gap to B,
+   !> h(p) = |p - c_B| - s_B r_B(direction), along A's tangent plane (a Newton step aimed at -h,
+   !> halved when h does not fall), `near_steps` times: true when a point with h below
+   !> -1e-9 s_B r_max,B is found (a point of A inside B: the bodies overlap).
+   pure logical function dives_into(a, ca, ra, sa, b, cb, rb, sb) result(hit)
+      type(contact_body_type), intent(in) :: a, b
+      real(wp), intent(in) :: ca(3), ra(3, 3), sa, cb(3), rb(3, 3), sb
+      real(wp) :: u(3), p(3), n(3), h, dh(3), t(3), q(3), nq(3), hq, dq(3), lim, tt, step
+      integer :: k, tries
+      logical :: ok
+      hit = .false.
+      u = cb - ca
+      if (norm2(u) <= 0.0_wp) return
+      call surface_at(a, ca, ra, sa, matmul(u, ra), p, n)
+      call radial_gap_at(b, cb, rb, sb, p, h, dh, ok)
+      if (.not. ok) return
+      lim = -1.0e-9_wp * sb * b%r_max
+      do k = 1, near_steps
+         if (h < lim) then
+            hit = .true.
+            return
+         end if
+         t = dh - dot_product(dh, n) * n
+         tt = dot_product(t, t)
+         if (tt <= 1.0e-24_wp) return
+         step = 2.0_wp * h / tt
+         do tries = 1, 3
+            call surface_at(a, ca, ra, sa, matmul(p - step * t - ca, ra), q, nq)
+            call radial_gap_at(b, cb, rb, sb, q, hq, dq, ok)
+            if (ok .and. hq < h) exit
+            step = 0.5_wp * step
+         end do
+         if (.not. ok .or. hq >= h) return
+         p = q
+         n = nq
+         h = hq
+         dh = dq
+      end do
+      hit = h < lim
+   end function dives_into
+
+   !> The radial gap h = |p - c_B| - s_B r_B(v) of a world point p to posed body B along the ray
+   !> from B's centre, and its gradient (world): v - s_B g/|p - c_B| with g B's surface gradient
+   !> in the world frame. `ok` false when the ray is within 1e-6 rad of B's z axis (not evaluated).
+   pure subroutine radial_gap_at(b, cb, rb, sb, p, h, dh, ok)
+      type(contact_body_type), intent(in) :: b
+      real(wp), intent(in) :: cb(3), rb(3, 3), sb, p(3)
+      real(wp), intent(out) :: h, dh(3)
+      logical, intent(out) :: ok
+      real(wp) :: x(3), rho, v(3), w(3), r, g(3)
+      x = p - cb
+      rho = norm2(x)
+      h = huge(1.0_wp)
+      dh = 0.0_wp
+      ok = rho > 0.0_wp
+      if (.not. ok) return
+      v = x / rho
+      w = matmul(v, rb)
+      ok = w(1)**2 + w(2)**2 >= 1.0e-12_wp
+      if (.not. ok) return
+      call b%shape%radius_gradient(w, r, g)
+      h = rho - sb * r
+      dh = v - sb * matmul(rb, g) / rho
+   end subroutine radial_gap_at
 
    !> The surface point p (world) of body x posed at (cx, rx, sx) along the body-frame direction v
    !> (need not be normalised; moved off the z axis when within 1e-6 rad of it), and the unit
