@@ -233,8 +233,9 @@ contains
    end subroutine new_kind_set
 
    !> Build the kinds `list` that are not built yet: the geometry and bare bodies of their bases
-   !> (`base`) in parallel, then their originals' (`same`) shells in parallel, then the copies. A
-   !> failure (a shell that cannot be built) is returned.
+   !> (`base`, one per (shape, order), shared: `body_holder`) in parallel, the gap of their shells,
+   !> then the copies (`same`). The shell layers come later (`build_layers`). A failure is
+   !> returned.
    subroutine build(self, kinds, list, error)
       !> Bookkeeping.
       class(kind_set_type), intent(inout) :: self
@@ -275,26 +276,16 @@ contains
             end do
          end do
          block
-            integer, allocatable :: bases(:), fresh(:)
-            logical, allocatable :: hit(:)
+            integer, allocatable :: bases(:)
+            integer :: nbuilt
             bases = pack(todo, self%base(todo) == todo .and. .not. self%base_built(todo))
             do i = 1, size(bases)
                kinds(bases(i))%body_kind = bases(i)
             end do
             if (size(bases) > 0) then
-               ! from the cache where it has them, the others built in parallel and stored
-               allocate (hit(size(bases)))
-               hit = .false.
-               do i = 1, size(bases)
-                  if (self%cache%on) call load_base(self, kinds(bases(i)), hit(i))
-               end do
-               fresh = pack(bases, .not. hit)
-               call build_shared(self, kinds, fresh, .true., error)
+               call build_cached(self, kinds, bases, .true., nbuilt, error)
                if (allocated(error)) return
-               self%bases_built = self%bases_built + size(fresh)
-               do i = 1, size(fresh)
-                  if (self%cache%on) call store_base(self, kinds(fresh(i)))
-               end do
+               self%bases_built = self%bases_built + nbuilt
                self%base_built(bases) = .true.
             end if
          end block
@@ -341,9 +332,9 @@ contains
       integer, intent(in) :: list(:)
       !> Error of the first kind that failed.
       type(error_type), allocatable, intent(out) :: error
-      logical, allocatable :: want(:), hit(:)
-      integer, allocatable :: todo(:), fresh(:)
-      integer :: i, k, o
+      logical, allocatable :: want(:)
+      integer, allocatable :: todo(:)
+      integer :: i, k, o, nbuilt
       if (self%p%nlayer == 0) return
       call self%build(kinds, list, error)
       if (allocated(error)) return
@@ -355,18 +346,9 @@ contains
       want = want .and. .not. self%layered
       todo = pack([(k, k=1, size(kinds))], want)
       if (size(todo) > 0) then
-         allocate (hit(size(todo)))
-         hit = .false.
-         do i = 1, size(todo)
-            if (self%cache%on) call load_shells(self, kinds(todo(i)), hit(i))
-         end do
-         fresh = pack(todo, .not. hit)
-         call build_shared(self, kinds, fresh, .false., error)
+         call build_cached(self, kinds, todo, .false., nbuilt, error)
          if (allocated(error)) return
-         self%shells_built = self%shells_built + size(fresh)
-         do i = 1, size(fresh)
-            if (self%cache%on) call store_shells(self, kinds(fresh(i)))
-         end do
+         self%shells_built = self%shells_built + nbuilt
          self%layered(todo) = .true.
       end if
       do i = 1, size(list)
@@ -378,6 +360,45 @@ contains
          self%layered(k) = .true.
       end do
    end subroutine build_kind_layers
+
+   !> The bases (`bases`: geometry and bare body) or the shell layers of kinds(list): from the
+   !> cache where it has them, the others built in parallel (shared between processes with an
+   !> exchange) and stored; nbuilt of them were built here.
+   subroutine build_cached(self, kinds, list, bases, nbuilt, error)
+      type(kind_set_type), intent(inout) :: self
+      type(particle_kind_type), intent(inout) :: kinds(:)
+      integer, intent(in) :: list(:)
+      logical, intent(in) :: bases
+      integer, intent(out) :: nbuilt
+      type(error_type), allocatable, intent(out) :: error
+      logical, allocatable :: hit(:)
+      integer, allocatable :: fresh(:)
+      integer :: i
+      nbuilt = 0
+      allocate (hit(size(list)))
+      hit = .false.
+      if (self%cache%on) then
+         do i = 1, size(list)
+            if (bases) then
+               call load_base(self, kinds(list(i)), hit(i))
+            else
+               call load_shells(self, kinds(list(i)), hit(i))
+            end if
+         end do
+      end if
+      fresh = pack(list, .not. hit)
+      call build_shared(self, kinds, fresh, bases, error)
+      if (allocated(error)) return
+      nbuilt = size(fresh)
+      if (.not. self%cache%on) return
+      do i = 1, size(fresh)
+         if (bases) then
+            call store_base(self, kinds(fresh(i)))
+         else
+            call store_shells(self, kinds(fresh(i)))
+         end if
+      end do
+   end subroutine build_cached
 
    !> Index of the kind whose `body` is kind k's bare body (`body_kind`; k itself when 0).
    pure integer function body_holder(kinds, k) result(h)

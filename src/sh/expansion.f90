@@ -234,14 +234,8 @@ contains
       real(wp), intent(out) :: r
       !> |grad r| at u (per radian).
       real(wp), intent(out) :: slope
-      real(wp) :: rho, len, x, s, cp, sp, rt, rp
-
-      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
-      rho = sqrt(u(1)**2 + u(2)**2)
-      x = u(3) / len
-      s = rho / len
-      cp = u(1) / rho
-      sp = u(2) / rho
+      real(wp) :: x, s, cp, sp, rt, rp
+      call off_pole(u, x, s, cp, sp)
       call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
       slope = sqrt(rt**2 + rp**2) / s
    end subroutine radius_slope
@@ -257,16 +251,25 @@ contains
       real(wp), intent(in) :: u(3)
       !> r(u) and the surface gradient.
       real(wp), intent(out) :: r, g(3)
-      real(wp) :: rho, len, x, s, cp, sp, rt, rp
+      real(wp) :: x, s, cp, sp, rt, rp
+      call off_pole(u, x, s, cp, sp)
+      call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
+      g = (rt / s) * [x * cp, x * sp, -s] + (rp / s) * [-sp, cp, 0.0_wp]
+   end subroutine radius_gradient
+
+   !> cos and sin of the polar angle and of the azimuth of a direction u off the z axis (need not
+   !> be normalised).
+   pure subroutine off_pole(u, x, s, cp, sp)
+      real(wp), intent(in) :: u(3)
+      real(wp), intent(out) :: x, s, cp, sp
+      real(wp) :: len, rho
       len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
       rho = sqrt(u(1)**2 + u(2)**2)
       x = u(3) / len
       s = rho / len
       cp = u(1) / rho
       sp = u(2) / rho
-      call sh_sum_slope(self%table, self%a, self%b, self%nmax, x, s, cp, sp, r, rt, rp)
-      g = (rt / s) * [x * cp, x * sp, -s] + (rp / s) * [-sp, cp, 0.0_wp]
-   end subroutine radius_gradient
+   end subroutine off_pole
 
    !> r, its surface gradient g (tangent 3-vector: r_theta e_theta + (r_phi / sin theta) e_phi)
    !> and hmax, the largest |eigenvalue| of its covariant Hessian on the unit sphere (so that, at
@@ -281,13 +284,8 @@ contains
       real(wp), intent(in) :: u(3)
       !> r(u), gradient, largest |eigenvalue| of the Hessian.
       real(wp), intent(out) :: r, g(3), hmax
-      real(wp) :: len, rho, ct, st, cp, sp, f(6), cot, h11, h12, h22
-      len = sqrt(u(1)**2 + u(2)**2 + u(3)**2)
-      rho = sqrt(u(1)**2 + u(2)**2)
-      ct = u(3) / len
-      st = rho / len
-      cp = u(1) / rho
-      sp = u(2) / rho
+      real(wp) :: ct, st, cp, sp, f(6), cot, h11, h12, h22
+      call off_pole(u, ct, st, cp, sp)
       ! r, r_t, r_p, r_tt, r_tp, r_pp (plain derivatives in theta and phi)
       call sh_sum_surface(self%table, self%a, self%b, self%table%enm, self%nmax, ct, st, cp, sp, f)
       r = f(1)
