@@ -47,7 +47,7 @@ module anm_contact_overlap
    implicit none
    private
 
-   public :: contact_method, contact_params_type, bodies_overlap, overlap_early, overlap_depth, body_crosses_walls, &
+   public :: contact_method, contact_params_type, bodies_overlap, overlap_early, first_stages, overlap_depth, body_crosses_walls, &
       & point_inside, sector_range, boxes_disjoint, cap_bounds, cap_outside, cap_inside
 
    !> Contact methods.
@@ -189,11 +189,9 @@ module anm_contact_overlap
 contains
 
    !> True when the first stages of `bodies_overlap` alone prove that the two posed bodies
-   !> overlap (bounding and inscribed spheres, the surface points on the line of centres, the
-   !> furthest-reaching points of the support tables): a few radius evaluations, no descent. When
-   !> it is true, `bodies_overlap` is true; when it is false, nothing is known. A candidate tested
-   !> against several bodies can look for such an overlap among all of them before it certifies
-   !> any pair near contact (`packing%fits`).
+   !> overlap (`first_stages`). When it is true, `bodies_overlap` is true; when it is false,
+   !> nothing is known. A candidate tested against several bodies can look for such an overlap
+   !> among all of them before it certifies any pair near contact (`packing%fits`).
    pure logical function overlap_early(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, &
                                        params, margin) result(hit)
       !> First body.
@@ -216,6 +214,27 @@ contains
       type(contact_params_type), intent(in) :: params
       !> Gap (mm) the bodies must keep, as in `bodies_overlap` (default 0).
       real(wp), intent(in), optional :: margin
+      logical :: apart
+      call first_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, hit, apart, &
+                        margin)
+   end function overlap_early
+
+   !> The first stages of `bodies_overlap` alone (bounding and inscribed spheres, the surface
+   !> points on the line of centres, the furthest-reaching points of the support tables; in
+   !> certified mode or with a margin also the separating planes of 2c and the local descent of
+   !> 2d): a few dozen radius evaluations, no box traversal or distance search. `hit`: they proved
+   !> an overlap (closer than the margin), and `bodies_overlap` is true; `apart`: they proved the
+   !> bodies apart, and it is false; neither: nothing is known.
+   pure subroutine first_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, hit, &
+                                apart, margin)
+      !> The posed bodies and the parameters, as in `overlap_early`.
+      type(contact_body_type), intent(in) :: body_a, body_b
+      real(wp), intent(in) :: center_a(3), rot_a(3, 3), scale_a, center_b(3), rot_b(3, 3), scale_b
+      type(contact_params_type), intent(in) :: params
+      !> Overlap proved; bodies proved apart.
+      logical, intent(out) :: hit, apart
+      !> Gap (mm) the bodies must keep, as in `bodies_overlap` (default 0).
+      real(wp), intent(in), optional :: margin
       type(early_type) :: e
       real(wp) :: m
       m = 0.0_wp
@@ -225,13 +244,14 @@ contains
       call early_stages(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, params, .true., &
                         m > 0.0_wp .or. params%certified, m, e)
       hit = e%status == early_overlap
+      apart = e%status == early_disjoint
       if (e%status /= early_open) return
       if (m > 0.0_wp) then
          hit = near_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b, m)
       else if (params%certified .and. params%method /= contact_method%newton_raphson) then
          hit = inside_points(body_a, center_a, rot_a, scale_a, body_b, center_b, rot_b, scale_b)
       end if
-   end function overlap_early
+   end subroutine first_stages
 
    !> Stages 1 to 2c of `bodies_overlap` (with the Newton-Raphson method stage 1 only; 2 and 2b
    !> only with `proofs`, 2c only with `planes`): e%status says whether they decide the pair;

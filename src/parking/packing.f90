@@ -27,7 +27,7 @@
 module anm_parking_packing
    use anm_core_kinds, only: wp
    use anm_contact_body, only: contact_body_type
-   use anm_contact_overlap, only: contact_params_type, bodies_overlap, overlap_early, body_crosses_walls
+   use anm_contact_overlap, only: contact_params_type, bodies_overlap, first_stages, body_crosses_walls
    use anm_config_shells, only: shell_mode
    use anm_neighbours_cell_list, only: cell_list_type, new_cell_list
    use anm_parking_kinds, only: particle_kind_type, body_holder
@@ -472,78 +472,79 @@ contains
          ! an overlap the first stages prove, with any candidate, before any pair near contact is
          ! certified (the answer is the same: the full test would report that overlap too)
          if (ncand >= 2) then
-            if (any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.true.)) return
+            call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .true., .false., hit)
+            if (hit) return
          end if
          ! the full tests (without the proofs just run, when they were)
-         if (any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early=.false., &
-                         proofs_done=ncand >= 2)) return
+         call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .false., ncand >= 2, hit)
+         if (hit) return
       end associate
       ok = .true.
    end function fits
 
    !> Whether the candidate (kind kq at x, rr, sc) overlaps one of the ncand candidates in
-   !> scratch (in the order of `likely_first`; jskip's own record skipped), with the bodies the
-   !> shell mode tests: by the full contact test, or (early) by its first stages alone
-   !> (`overlap_early`: true only where the full test is true; false says nothing). With
-   !> proofs_done the full tests skip the early overlap proofs (the caller ran them on these pairs).
-   pure logical function any_overlap(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, &
-                                     proofs_done) result(hit)
+   !> scratch (in the order of `likely_first`; jskip's own record and records set to 0 skipped),
+   !> with the bodies and the gap the shell mode tests (`pair_gap`): by the full contact test, or
+   !> (early) by its first stages alone (`first_stages`: an overlap only where the full test finds
+   !> one). The early pass sets to 0 the records of the candidates whose first stages proved them apart,
+   !> so that the full pass does not test them again. With proofs_done the full tests skip the
+   !> early overlap proofs (the caller ran them on these pairs).
+   pure subroutine scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, &
+                                   proofs_done, hit)
       type(packing_type), intent(in) :: self
       type(particle_kind_type), intent(in) :: kq
       !> The candidate's bare body (its kind's shared one).
       type(contact_body_type), intent(in) :: bq
       real(wp), intent(in) :: x(3), rr(3, 3), sc
-      type(fit_scratch_type), intent(in) :: scratch
+      type(fit_scratch_type), intent(inout) :: scratch
       integer, intent(in) :: ncand, order(:), jskip
-      logical, intent(in) :: sorted, early
-      logical, intent(in), optional :: proofs_done
+      logical, intent(in) :: sorted, early, proofs_done
+      logical, intent(out) :: hit
       integer :: ii, i, j
-      real(wp) :: xj(3)
-      logical :: done
-      done = .false.
-      if (present(proofs_done)) done = proofs_done
+      real(wp) :: xj(3), m
+      logical :: apart, proved
       hit = .true.
-      associate (p => self%p)
-         do ii = 1, ncand
-            i = ii
-            if (sorted) i = order(ii)
-            j = scratch%cand(i)
-            if (j == jskip) then
-               if (all(scratch%shift(:, i) == 0.0_wp)) cycle
+      do ii = 1, ncand
+         i = ii
+         if (sorted) i = order(ii)
+         j = scratch%cand(i)
+         if (j == 0) cycle
+         if (j == jskip) then
+            if (all(scratch%shift(:, i) == 0.0_wp)) cycle
+         end if
+         xj = self%center(:, j) + scratch%shift(:, i)
+         associate (rj => self%rot(:, :, j), sj => self%scale(j), &
+                    bj => self%kinds(body_holder(self%kinds, self%kind_of(j)))%body)
+            m = pair_gap(self%p, kq, sc, self%kinds(self%kind_of(j)), sj)
+            if (early) then
+               call first_stages(bq, x, rr, sc, bj, xj, rj, sj, self%p%contact, proved, apart, margin=m)
+               if (proved) return
+               if (apart) scratch%cand(i) = 0
+            else
+               if (bodies_overlap(bq, x, rr, sc, bj, xj, rj, sj, self%p%contact, proofs_done=proofs_done, &
+                                  margin=m)) return
             end if
-            xj = self%center(:, j) + scratch%shift(:, i)
-            associate (kj => self%kinds(self%kind_of(j)), rj => self%rot(:, :, j), sj => self%scale(j), &
-                       bj => self%kinds(body_holder(self%kinds, self%kind_of(j)))%body)
-               if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
-                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, 0.0_wp)) return
-               else if (p%mode == shell_mode%exclude) then
-                  ! both shells: the bare bodies keep the sum of their thicknesses apart
-                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, &
-                                   sc * kq%gap + sj * kj%gap)) return
-               else
-                  ! each shell against the other bare body: the larger thickness apart
-                  if (pair_overlap(early, done, bq, x, rr, sc, bj, xj, rj, sj, p%contact, &
-                                   max(sc * kq%gap, sj * kj%gap))) return
-               end if
-            end associate
-         end do
-      end associate
+         end associate
+      end do
       hit = .false.
-   end function any_overlap
+   end subroutine scan_candidates
 
-   !> `bodies_overlap` (proofs_done passed on), or with early `overlap_early`, of two posed bodies
-   !> that must keep the gap m (mm; 0: must not overlap).
-   pure logical function pair_overlap(early, done, a, xa, ra, sa, b, xb, rb, sb, params, m) result(hit)
-      logical, intent(in) :: early, done
-      type(contact_body_type), intent(in) :: a, b
-      real(wp), intent(in) :: xa(3), ra(3, 3), sa, xb(3), rb(3, 3), sb, m
-      type(contact_params_type), intent(in) :: params
-      if (early) then
-         hit = overlap_early(a, xa, ra, sa, b, xb, rb, sb, params, margin=m)
+   !> The gap (mm) the bare bodies of a candidate (kind kq, scale sc) and a parked particle (kind
+   !> kj, scale sj) must keep: 0 without shells or with overlapping ones; with exclusion shells the
+   !> sum of their thicknesses (both shells disjoint); with 'shell_overlap' the larger thickness
+   !> (each shell misses the other bare body).
+   pure real(wp) function pair_gap(p, kq, sc, kj, sj) result(m)
+      type(packing_params_type), intent(in) :: p
+      type(particle_kind_type), intent(in) :: kq, kj
+      real(wp), intent(in) :: sc, sj
+      if (p%nlayer == 0 .or. p%mode == shell_mode%overlap) then
+         m = 0.0_wp
+      else if (p%mode == shell_mode%exclude) then
+         m = sc * kq%gap + sj * kj%gap
       else
-         hit = bodies_overlap(a, xa, ra, sa, b, xb, rb, sb, params, proofs_done=done, margin=m)
+         m = max(sc * kq%gap, sj * kj%gap)
       end if
-   end function pair_overlap
+   end function pair_gap
 
    !> Candidate records to particle ids, retired records dropped (order kept).
    pure subroutine live_candidates(self, cnd, shf, ncand)
