@@ -684,11 +684,12 @@ contains
       real(wp), intent(in) :: cx(3), rx(3, 3), sx, v(3)
       real(wp), intent(out) :: p(3), n(3)
       real(wp) :: w(3), r, g(3), len
-      w = v
-      len = norm2(w)
-      if (len <= 0.0_wp) w = [0.0_wp, 0.0_wp, 1.0_wp]
-      w = w / max(len, tiny(1.0_wp))
-      if (len <= 0.0_wp) w = [1.0_wp, 0.0_wp, 0.0_wp]
+      len = norm2(v)
+      if (len > 0.0_wp) then
+         w = v / len
+      else
+         w = [1.0_wp, 0.0_wp, 0.0_wp]
+      end if
       if (w(1)**2 + w(2)**2 < 1.0e-12_wp) then
          w(1) = w(1) + 1.0e-6_wp
          w = w / norm2(w)
