@@ -12,7 +12,8 @@ summary table (`NAME-summary.csv`, row `total`):
   `--total` of the box.
 
 Both strategies use void placement, 2,000 locations and `max_failures = 100` (RSA's own stopping
-rule); the dense runs add `strategy = 'dense'`, `dense_sweeps = 4`, `dense_grow_scale = 0.7` and
+rule); the dense runs add `strategy = 'dense'`, `dense_sweeps = 4`, `dense_grow_scale = 0.7`,
+`dense_overfill = 0.2`, `contact_gap = 0.003` (as inputs/concrete.nml) and
 `dense_time_limit = --time-limit` seconds. Each row gives the target, the total reached, the
 particles and the wall and CPU seconds of the run; each run's progress lines are kept in
 `WORK/GRADATION-STRATEGY.log`.
@@ -39,7 +40,7 @@ PARKING = {
     "rsa": "&parking max_locations = 2000, placement = 'void', max_failures = 100 /",
     "dense": ("&parking max_locations = 2000, placement = 'void', max_failures = 100,\n"
               "   strategy = 'dense', dense_rounds = 20, dense_sweeps = 4, dense_grow_scale = 0.7,\n"
-              "   dense_time_limit = {limit} /"),
+              "   dense_overfill = 0.2, contact_gap = 0.003, dense_time_limit = {limit} /"),
 }
 
 
@@ -123,7 +124,7 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default="concrete,msand,table2_3")
     ap.add_argument("--strategies", default="rsa,dense")
     ap.add_argument("--total", type=float, default=0.60, help="total fraction asked of msand and table2_3")
-    ap.add_argument("--time-limit", type=float, default=540.0, help="dense_time_limit of the dense runs (s)")
+    ap.add_argument("--time-limit", type=float, default=570.0, help="dense_time_limit of the dense runs (s)")
     ap.add_argument("--work", help="folder for the namelists and models (default: a temporary one)")
     args = ap.parse_args(argv)
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="dense-table-"))

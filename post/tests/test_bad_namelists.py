@@ -87,6 +87,18 @@ def test_dense_grow_scale_out_of_range_is_named(anm_bin, tmp_path, value):
     refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: dense_grow_scale", "must be 0 (no growth) or in (0, 1)")
 
 
+@pytest.mark.parametrize("value", ["-0.1", "1.5"])
+def test_dense_overfill_out_of_range_is_named(anm_bin, tmp_path, value):
+    text = GOOD + f"&parking strategy = 'dense', dense_grow_scale = 0.7,\n  dense_overfill = {value} /\n"
+    refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: dense_overfill", "must be in [0, 1]")
+
+
+@pytest.mark.parametrize("value", ["0", "0.2", "-1e-3"])
+def test_contact_gap_out_of_range_is_named(anm_bin, tmp_path, value):
+    text = GOOD + f"&parking max_locations = 100,\n  contact_gap = {value} /\n"
+    refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: contact_gap", "must be in [1e-4, 0.05]")
+
+
 def test_unknown_vrml_layout_is_named(anm_bin, tmp_path):
     text = GOOD.replace("vrml = .false. /", "vrml = .true.,\n  vrml_layout = 'flattened' /")
     refused(anm_bin, tmp_path, text, "bad.nml:5: &output: vrml_layout = 'flattened' must be 'instanced' or 'flat'")

@@ -3,12 +3,14 @@
 !>     &parking max_locations = 2000, contact_method = 'eob', placement = 'uniform' /
 !>
 !> Validates: max_locations, max_orientations, max_sizes, max_shapes, max_failures >= 1;
-!> n_ext, n_box >= 2; contact_method 'eob' or 'newton_raphson' (resolved to `contact_method%...`);
-!> placement 'uniform' or 'void' (resolved to `placement%...`); strategy 'rsa' or 'dense' (resolved
-!> to `parking_strategy%...`); dense_rounds, dense_sweeps >= 1; 0 < dense_target_acceptance < 1;
-!> dense_time_limit >= 0; last_particle 'closer' or 'overshoot' (resolved to `last_particle%...`);
-!> sieve_carry 'rounding' or 'none' (resolved to `sieve_carry%...`). The strategy and the dense
-!> variables are dumped only for 'dense', last_particle and sieve_carry only when not their default
+!> n_ext, n_box >= 2; 1e-4 <= contact_gap <= 0.05; contact_method 'eob' or 'newton_raphson'
+!> (resolved to `contact_method%...`); placement 'uniform' or 'void' (resolved to `placement%...`);
+!> strategy 'rsa' or 'dense' (resolved to `parking_strategy%...`); dense_rounds, dense_sweeps >= 1;
+!> 0 < dense_target_acceptance < 1; dense_time_limit >= 0; 0 <= dense_grow_scale < 1;
+!> 0 <= dense_overfill <= 1; last_particle 'closer' or 'overshoot' (resolved to
+!> `last_particle%...`); sieve_carry 'rounding' or 'none' (resolved to `sieve_carry%...`). The
+!> strategy and the dense variables are dumped only for 'dense', contact_gap, dense_overfill,
+!> last_particle and sieve_carry only when not their default
 !> (a run's resolved text is unchanged by options it does not use).
 !>
 !> Usage:
@@ -84,6 +86,9 @@ module anm_config_parking
       integer :: n_ext = 40, n_box = 128
       !> Certified contact.
       logical :: certified = .true.
+      !> Certified mode: relative gap resolution (pairs closer than contact_gap x the smaller
+      !> particle's length may be refused; contact_params_type%gap).
+      real(wp) :: contact_gap = 1.0e-3_wp
       !> Placement of candidate centres, one of `placement`.
       integer :: placement = placement%uniform
       !> Placement strategy, one of `parking_strategy`.
@@ -96,6 +101,9 @@ module anm_config_parking
       real(wp) :: dense_time_limit = 0.0_wp
       !> Dense: a round's insertions park at this fraction of their drawn width and grow (0: no growth).
       real(wp) :: dense_grow_scale = 0.0_wp
+      !> Dense with growth: a round asks for its missing volume times (1 + dense_overfill); growth
+      !> ends once the particles kept hold the sieve's volume.
+      real(wp) :: dense_overfill = 0.0_wp
       !> Rule for a sieve's last particle, one of `last_particle`.
       integer :: last_particle = last_particle%closer
       !> What a sieve that reached its target passes to the next one, one of `sieve_carry`.
@@ -119,10 +127,10 @@ contains
       character(len=16) :: placement, strategy, last_particle, sieve_carry
       logical :: certified
       integer :: dense_rounds, dense_sweeps
-      real(wp) :: dense_target_acceptance, dense_time_limit, dense_grow_scale
+      real(wp) :: dense_target_acceptance, dense_time_limit, dense_grow_scale, dense_overfill, contact_gap
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
-         n_ext, n_box, certified, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
-         dense_time_limit, dense_grow_scale, last_particle, sieve_carry
+         n_ext, n_box, certified, contact_gap, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
+         dense_time_limit, dense_grow_scale, dense_overfill, last_particle, sieve_carry
       integer :: ig, stat
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -136,6 +144,7 @@ contains
       n_ext = self%n_ext
       n_box = self%n_box
       certified = self%certified
+      contact_gap = self%contact_gap
       placement = placement_name(self%placement)
       strategy = strategy_name(self%strategy)
       dense_rounds = self%dense_rounds
@@ -143,6 +152,7 @@ contains
       dense_target_acceptance = self%dense_target_acceptance
       dense_time_limit = self%dense_time_limit
       dense_grow_scale = self%dense_grow_scale
+      dense_overfill = self%dense_overfill
       last_particle = last_particle_name(self%last_particle)
       sieve_carry = sieve_carry_name(self%sieve_carry)
       ig = find_group(nml, "parking")
@@ -182,8 +192,14 @@ contains
                            //" must be 0 (no growth) or in (0, 1)")
          return
       end if
+      if (.not. (dense_overfill >= 0.0_wp .and. dense_overfill <= 1.0_wp)) then
+         call config_error(error, nml, ig, "parking", "dense_overfill", "= "//to_string(dense_overfill) &
+                           //" must be in [0, 1]")
+         return
+      end if
       self%dense_time_limit = dense_time_limit
       self%dense_grow_scale = dense_grow_scale
+      self%dense_overfill = dense_overfill
       self%max_locations = max_locations
       self%max_orientations = max_orientations
       self%max_sizes = max_sizes
@@ -192,6 +208,12 @@ contains
       self%n_ext = n_ext
       self%n_box = n_box
       self%certified = certified
+      if (.not. (contact_gap >= 1.0e-4_wp .and. contact_gap <= 0.05_wp)) then
+         call config_error(error, nml, ig, "parking", "contact_gap", "= "//to_string(contact_gap) &
+                           //" must be in [1e-4, 0.05]")
+         return
+      end if
+      self%contact_gap = contact_gap
       select case (to_lower(trim(contact_method)))
       case ("eob")
          self%contact_method = contact_method_enum_eob()
@@ -378,7 +400,9 @@ contains
                 //", dense_sweeps = "//to_string(self%dense_sweeps)//", dense_target_acceptance = " &
                 //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit) &
                 //", dense_grow_scale = "//to_string(self%dense_grow_scale)
+         if (self%dense_overfill > 0.0_wp) text = text//", dense_overfill = "//to_string(self%dense_overfill)
       end if
+      if (self%contact_gap /= 1.0e-3_wp) text = text//", contact_gap = "//to_string(self%contact_gap)
       ! likewise the thesis' sieve-volume rules, only when chosen
       if (self%last_particle /= last_particle%closer) text = text//", last_particle = '" &
                                                              //last_particle_name(self%last_particle)//"'"

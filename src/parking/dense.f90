@@ -55,6 +55,9 @@ module anm_parking_dense
       !> Growth: a round's insertions park at this fraction of the drawn width and grow towards it
       !> by Monte Carlo growth moves (0: no growth, insertions at full size).
       real(wp) :: grow_scale = 0.0_wp
+      !> Growth: a round asks RSA for its missing volume times (1 + overfill); the growth of a sieve
+      !> ends once the particles it keeps hold its target volume, the rest at the size they reached.
+      real(wp) :: overfill = 0.0_wp
       !> Shell layers given in mm (a particle short of its size would have a thinner shell).
       logical :: absolute_shells = .false.
       !> Relaxation-and-insertion rounds per sieve; sweeps per round.
@@ -164,7 +167,7 @@ contains
             a2%min_width = f * ap(s)%min_width
             a2%max_width = f * ap(s)%max_width
             full = sieve_totals(pk, s, tsc)
-            request = (target - full%vol) * f**3
+            request = (target - full%vol) * f**3 * (1.0_wp + dp%overfill)
             np0 = pk%np
             if (pk%ndead > 0) call pk%compact()
             call park_rsa(pk, ks, [a2], rp, [request / rp%vbox], r1, run, error)
@@ -178,7 +181,7 @@ contains
             full = sieve_totals(pk, s, tsc)
             if (grow .and. close_enough(full, target)) then
                ! enough particles once grown: grow them; those that cannot grow go (next round)
-               call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
+               call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run)
                call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
                full = sieve_totals(pk, s, tsc)
             end if
@@ -187,7 +190,7 @@ contains
             call round_line(rp, ms, s, round, res, full, target)
          end do
          if (grow) then
-            call finish_growth(pk, ms, dp, tsc, s, rp%progress_unit, rp%vbox, run)
+            call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run)
             call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
             res = sieve_totals(pk, s)
             res%reached = close_enough(res, target)
@@ -277,32 +280,32 @@ contains
       end do
    end function sieve_totals
 
-   !> Growth sweeps of sieve s while some of its particles are below their target
-   !> size and their volume still grows (stop after 10 sweeps without 0.01 % gain, after 50 x
-   !> sweeps, or when the wall-clock limit has passed); only the particles still short and their
-   !> neighbours move.
+   !> Growth sweeps of sieve s while some of its particles are below their target size, the
+   !> particles `settle_growth` would keep hold less than `target` (mm^3) and the sieve's volume still
+   !> grows (stop after 10 sweeps without 0.01 % gain, after 50 x sweeps, or when the wall-clock
+   !> limit has passed); only the particles still short and their neighbours move.
    !> A progress line (on `unit` >= 0) gives the sweeps done, the particles still short and the
    !> sieve's fraction.
-   subroutine finish_growth(pk, ms, dp, tsc, s, unit, vbox, run)
+   subroutine finish_growth(pk, ms, dp, tsc, s, min_width, target, unit, vbox, run)
       type(packing_type), intent(inout) :: pk
       type(move_state_type), intent(inout) :: ms
       type(dense_params_type), intent(in) :: dp
       real(wp), intent(in) :: tsc(:)
       integer, intent(in) :: s, unit
-      real(wp), intent(in) :: vbox
+      real(wp), intent(in) :: min_width, target, vbox
       type(run_state_type), intent(in) :: run
       integer :: j, idle, nshort
-      real(wp) :: vol, best
+      real(wp) :: vol, kept, best
       best = 0.0_wp
       idle = 0
       do j = 1, 50 * dp%sweeps
-         call growth_state(pk, tsc, s, nshort, vol)
+         call growth_state(pk, tsc, s, min_width, dp%absolute_shells, nshort, vol, kept)
          if (unit >= 0 .and. j > 1 .and. mod(j - 1, 10) == 0) then
             write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth sweep ", j - 1, ", ", nshort, &
                " particles short of their size, fraction ", vol / vbox
             flush (unit)
          end if
-         if (nshort == 0 .or. out_of_time(dp, run)) exit
+         if (nshort == 0 .or. kept >= target .or. out_of_time(dp, run)) exit
          if (vol > best * (1.0_wp + 1.0e-4_wp)) then
             best = vol
             idle = 0
@@ -312,7 +315,7 @@ contains
          end if
          call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
       end do
-      call growth_state(pk, tsc, s, nshort, vol)
+      call growth_state(pk, tsc, s, min_width, dp%absolute_shells, nshort, vol, kept)
       if (unit >= 0 .and. j > 1) then
          write (unit, '(a,i0,a,i0,a,i0,a,f8.5)') "sieve ", s, ": growth ended after ", min(j - 1, 50 * dp%sweeps), &
             " sweeps, ", nshort, " particles short of their size, fraction ", vol / vbox
@@ -320,20 +323,32 @@ contains
       end if
    end subroutine finish_growth
 
-   !> Particles of sieve s below their target scale, and the sieve's volume (mm^3) as it is.
-   pure subroutine growth_state(pk, tsc, s, nshort, vol)
+   !> Particles of sieve s below their target scale, the sieve's volume (mm^3) as it is, and the
+   !> volume of the particles `settle_growth` would keep (full size, or short with a width of at
+   !> least `min_width` when the shells are not in mm).
+   pure subroutine growth_state(pk, tsc, s, min_width, absolute_shells, nshort, vol, kept)
       type(packing_type), intent(in) :: pk
       real(wp), intent(in) :: tsc(:)
       integer, intent(in) :: s
+      real(wp), intent(in) :: min_width
+      logical, intent(in) :: absolute_shells
       integer, intent(out) :: nshort
-      real(wp), intent(out) :: vol
-      integer :: i
+      real(wp), intent(out) :: vol, kept
+      integer :: i, k
+      real(wp) :: v
       nshort = 0
       vol = 0.0_wp
+      kept = 0.0_wp
       do i = 1, pk%np
          if (pk%sieve(i) /= s) cycle
-         vol = vol + pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
-         if (pk%scale(i) < tsc(i)) nshort = nshort + 1
+         k = pk%kind_of(i)
+         v = pk%scale(i)**3 * pk%kinds(k)%volume
+         vol = vol + v
+         if (pk%scale(i) < tsc(i)) then
+            nshort = nshort + 1
+            if (absolute_shells .or. pk%scale(i) * pk%kinds(k)%width < min_width) cycle
+         end if
+         kept = kept + v
       end do
    end subroutine growth_state
 

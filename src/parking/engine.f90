@@ -292,6 +292,7 @@ contains
       p%contact%next = cfg%parking%n_ext
       p%contact%nbox = cfg%parking%n_box
       p%contact%certified = cfg%parking%certified
+      p%contact%gap = cfg%parking%contact_gap
    end function packing_params
 
    !> What the attempt sequences of sieve s need of the configuration.
@@ -347,6 +348,7 @@ contains
       p%target_acceptance = cfg%parking%dense_target_acceptance
       p%time_limit = cfg%parking%dense_time_limit
       p%grow_scale = cfg%parking%dense_grow_scale
+      p%overfill = cfg%parking%dense_overfill
       p%absolute_shells = cfg%shells%nlayer > 0 .and. cfg%shells%unit == thickness_unit%mm
       p%nthreads = omp_get_max_threads()
    end function dense_params
