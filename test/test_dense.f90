@@ -347,7 +347,8 @@ contains
       call check(error, gmin >= 2.0_wp * t - 1.0e-9_wp, "gap below 2t")
    end subroutine test_shell_gap
 
-   !> Smallest surface gap of equal spheres of diameter 2 (brute force, periodic).
+   !> Smallest surface gap of the unit-sphere particles of a model (radius = scale; brute force,
+   !> periodic).
    pure real(wp) function sphere_gap(m) result(gmin)
       type(model_type), intent(in) :: m
       real(wp) :: d(3)
@@ -357,7 +358,7 @@ contains
          do j = i + 1, m%np
             d = m%center(:, i) - m%center(:, j)
             d = d - m%box * anint(d / m%box)
-            gmin = min(gmin, norm2(d) - 2.0_wp)
+            gmin = min(gmin, norm2(d) - m%scale(i) - m%scale(j))
          end do
       end do
    end function sphere_gap
@@ -417,22 +418,14 @@ contains
       type(error_type), allocatable, intent(out) :: error
       type(model_type) :: m
       type(verify_report_type) :: rep
-      real(wp) :: d(3), gmin
-      integer :: i, j
+      real(wp) :: gmin
       call run_nml("dense_overfill.nml", "&box length = 10, 10, 10 /"//new_line("a")// &
                    "&sieves nsieve = 1, min_width = 1.6, max_width = 2.0, fraction = 0.46, source = 'sphere', " &
                    //"order = 0 /"//new_line("a")//"&parking max_locations = 2000, strategy = 'dense', " &
                    //"dense_rounds = 4, dense_sweeps = 5, dense_grow_scale = 0.7, dense_overfill = 0.2, " &
                    //"contact_gap = 0.003 /", m, error)
       if (allocated(error)) return
-      gmin = huge(1.0_wp)
-      do i = 1, m%np
-         do j = i + 1, m%np
-            d = m%center(:, i) - m%center(:, j)
-            d = d - m%box * anint(d / m%box)
-            gmin = min(gmin, norm2(d) - m%scale(i) - m%scale(j))
-         end do
-      end do
+      gmin = sphere_gap(m)
       print '(a,f7.4,a,i0,a,es9.2,a,3f7.4)', "        fraction ", m%achieved_fraction(1), " (", m%np, &
          " spheres), smallest gap ", gmin, ", widths min, mean, max ", 2.0_wp * minval(m%scale), &
          2.0_wp * sum(m%scale) / m%np, 2.0_wp * maxval(m%scale)
