@@ -249,7 +249,7 @@ contains
       removed = .false.
       do i = pk%np, 1, -1
          if (pk%sieve(i) /= s .or. pk%scale(i) >= tsc(i)) cycle
-         if (.not. absolute_shells .and. pk%scale(i) * pk%kinds(pk%kind_of(i))%width >= min_width) then
+         if (keeps_short(pk, i, min_width, absolute_shells)) then
             tsc(i) = pk%scale(i)
          else
             tsc(i) = tsc(pk%np)
@@ -260,6 +260,16 @@ contains
       tsc = tsc(:pk%np)
       if (removed) call pk%compact()
    end subroutine settle_growth
+
+   !> Whether particle i, short of its target size, may stay at its size when its sieve's growth
+   !> ends: its width is still at least the sieve's `min_width` and its shells are not in mm.
+   pure logical function keeps_short(pk, i, min_width, absolute_shells) result(keep)
+      type(packing_type), intent(in) :: pk
+      integer, intent(in) :: i
+      real(wp), intent(in) :: min_width
+      logical, intent(in) :: absolute_shells
+      keep = .not. absolute_shells .and. pk%scale(i) * pk%kinds(pk%kind_of(i))%width >= min_width
+   end function keeps_short
 
    !> Particles and volume of sieve s as they are in the packing, or with every particle at its
    !> target scale `tsc` (the shell fractions are summed at the end of the run: anm_parking_engine).
@@ -324,8 +334,7 @@ contains
    end subroutine finish_growth
 
    !> Particles of sieve s below their target scale, the sieve's volume (mm^3) as it is, and the
-   !> volume of the particles `settle_growth` would keep (full size, or short with a width of at
-   !> least `min_width` when the shells are not in mm).
+   !> volume of the particles `settle_growth` would keep (full size, or short and `keeps_short`).
    pure subroutine growth_state(pk, tsc, s, min_width, absolute_shells, nshort, vol, kept)
       type(packing_type), intent(in) :: pk
       real(wp), intent(in) :: tsc(:)
@@ -334,19 +343,18 @@ contains
       logical, intent(in) :: absolute_shells
       integer, intent(out) :: nshort
       real(wp), intent(out) :: vol, kept
-      integer :: i, k
+      integer :: i
       real(wp) :: v
       nshort = 0
       vol = 0.0_wp
       kept = 0.0_wp
       do i = 1, pk%np
          if (pk%sieve(i) /= s) cycle
-         k = pk%kind_of(i)
-         v = pk%scale(i)**3 * pk%kinds(k)%volume
+         v = pk%scale(i)**3 * pk%kinds(pk%kind_of(i))%volume
          vol = vol + v
          if (pk%scale(i) < tsc(i)) then
             nshort = nshort + 1
-            if (absolute_shells .or. pk%scale(i) * pk%kinds(k)%width < min_width) cycle
+            if (.not. keeps_short(pk, i, min_width, absolute_shells)) cycle
          end if
          kept = kept + v
       end do
