@@ -29,8 +29,10 @@ contains
       tests = [ &
               new_unittest("add/remove/move: neighbours = brute force, periodic", test_neighbours_periodic), &
               new_unittest("add/remove/move: neighbours = brute force, walls", test_neighbours_walls), &
-              new_unittest("add/remove/move: fits = sphere overlap, periodic", test_fits_periodic), &
-              new_unittest("add/remove/move: fits = sphere overlap and walls", test_fits_walls), &
+              new_unittest("add/remove/move: fits (with and without a hint) = sphere overlap, periodic", &
+                           test_fits_periodic), &
+              new_unittest("add/remove/move: fits (with and without a hint) = sphere overlap and walls", &
+                           test_fits_walls), &
               new_unittest("compact keeps the particles and the answers", test_compact), &
               new_unittest("fits since a mark tests only later particles", test_since), &
               new_unittest("void grid: certified-bounds blocking = exact blocking", test_void_bounds), &
@@ -174,8 +176,8 @@ contains
       type(packing_type) :: pk
       type(rng_type) :: rng
       type(fit_scratch_type) :: scratch
-      real(wp) :: x(3), r
-      integer :: k, ans, nfit, nover
+      real(wp) :: x(3), r, rot(3, 3)
+      integer :: k, ans, nfit, nover, by, nby
       call sphere_packing(pk, periodic, [8.0_wp, 8.0_wp, 8.0_wp], error)
       if (allocated(error)) return
       call new_rng(rng, 23_i8, 0_i8)
@@ -187,6 +189,7 @@ contains
       end if
       nfit = 0
       nover = 0
+      nby = 0
       do k = 1, 400
          x = [rng%uniform(), rng%uniform(), rng%uniform()] * pk%p%box
          r = 0.1_wp * 10.0_wp**rng%uniform()
@@ -194,11 +197,26 @@ contains
          if (ans < 0) cycle
          if (ans == 1) nfit = nfit + 1
          if (ans == 0) nover = nover + 1
-         call check(error, pk%fits(1, x, random_rotation(rng), r, scratch) .eqv. (ans == 1), &
+         rot = random_rotation(rng)
+         call check(error, pk%fits(1, x, rot, r, scratch) .eqv. (ans == 1), &
                     "fits disagrees with the sphere overlap")
          if (allocated(error)) return
+         ! a hint (any particle, tested first) changes no answer; the particle named as the
+         ! refuser does overlap the candidate
+         call check(error, pk%fits(1, x, rot, r, scratch, hint=1 + mod(k * 7, pk%np), blocker=by) .eqv. &
+                    (ans == 1), "fits with a hint disagrees with the sphere overlap")
+         if (allocated(error)) return
+         if (by > 0) then
+            nby = nby + 1
+            call check(error, distance(pk, pk%center(:, by), x) < r + pk%scale(by), &
+                       "the particle named as refuser does not overlap the candidate")
+            if (allocated(error)) return
+         end if
       end do
       call check(error, nfit > 20 .and. nover > 20, "both answers were tested")
+      if (allocated(error)) return
+      ! after compact the cell list proves a sphere's overlap by itself (no pair test, no refuser)
+      if (.not. compact) call check(error, nby > 20, "refusers were named")
    end subroutine fits_case
 
    !> Slabs (the MPI build's spatial decomposition): for each slab of 3 along x, particles are added

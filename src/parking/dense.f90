@@ -77,6 +77,9 @@ module anm_parking_dense
       real(wp), allocatable :: d(:), a(:), g(:), dmax(:)
       !> Trials and acceptances of the last sweep per sieve: translations, rotations, growths.
       integer(i8), allocatable :: nt(:), at(:), nr(:), ar(:), ng(:), ag(:)
+      !> Per particle (by id): the particle that refused its last trial, 0 for none (tested first in
+      !> its next trial: no answer changes, a refusal is found sooner).
+      integer, allocatable :: blk(:)
       !> Sweeps done (keys the streams).
       integer :: sweep = 0
    end type move_state_type
@@ -97,6 +100,7 @@ contains
       allocate (ms%a(n), ms%g(n), ms%nt(n), ms%at(n), ms%nr(n), ms%ar(n), ms%ng(n), ms%ag(n))
       ms%a = 0.2_wp
       ms%g = 0.05_wp
+      allocate (ms%blk(0))
       ms%nt = 0
       ms%at = 0
       ms%nr = 0
@@ -383,7 +387,7 @@ contains
       type(fit_scratch_type), allocatable :: scr(:)
       real(wp), allocatable :: xn(:, :), rn(:, :, :), sq(:), cx(:, :), cr(:), tg(:)
       logical, allocatable :: ok(:), inside(:)
-      integer, allocatable :: typ(:), act(:)
+      integer, allocatable :: typ(:), act(:), by(:)
       integer :: nb, i0, n, b, i, t, nc, s, np, s0, na
       integer(i8) :: k
       real(wp) :: rb
@@ -407,23 +411,25 @@ contains
          if (near_short) act = growth_set(pk, tg, s0)
       end if
       if (.not. allocated(act)) act = pack([(i, i=1, np)], pk%sieve(:np) >= s0)
+      ! refusers by id: entries of removed or new particles are only hints
+      if (size(ms%blk) /= np) ms%blk = [ms%blk(:min(np, size(ms%blk))), (0, i=size(ms%blk) + 1, np)]
       na = size(act)
       nb = dp%batch
       if (nb <= 0) nb = 32 * max(1, dp%nthreads)
       allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sq(nb), ok(nb), inside(nb), &
-                typ(nb))
+                typ(nb), by(nb))
       ! committed moves of the batch: old and new centres, bounding radius
       allocate (cx(3, 2 * nb), cr(2 * nb))
       i0 = 0
       do while (i0 < na)
          n = min(nb, na - i0)
-         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, n, i0, k, scr, tg, act) &
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, by, n, i0, k, scr, tg, act) &
          !$omp private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
             i = act(i0 + b)
             call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b))
             t = omp_get_thread_num()
-            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(t), ok(b))
+            call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), ms%blk(i), scr(t), ok(b), by(b))
          end do
          !$omp end parallel do
          nc = 0
@@ -434,7 +440,7 @@ contains
             rb = pk%rho(i) * max(1.0_wp, sq(b) / pk%scale(i))
             if (inside(b)) then
                if (conflicts(pk, xn(:, b), rb, cx, cr, nc)) then
-                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), scr(0), ok(b))
+                  call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), ms%blk(i), scr(0), ok(b), by(b))
                end if
             end if
             select case (typ(b))
@@ -448,6 +454,7 @@ contains
                ms%ng(s) = ms%ng(s) + 1
                if (ok(b)) ms%ag(s) = ms%ag(s) + 1
             end select
+            if (inside(b)) ms%blk(i) = by(b)
             if (ok(b)) then
                cx(:, nc + 1) = pk%center(:, i)
                cx(:, nc + 2) = xn(:, b)
@@ -489,17 +496,20 @@ contains
 
    !> Outcome of the trial of particle i (pose x, r; scale sq; inside): ok when it fits (one
    !> certified `fits` test; a growth trial's sq is its grown scale). The result depends only on
-   !> the particle and the packing within the trial's reach.
-   subroutine evaluate(pk, i, x, r, sq, inside, scr, ok)
+   !> the particle and the packing within the trial's reach; `hint` (tested first) and `by` (the
+   !> particle that refused the trial, 0 for none) only change how soon a refusal is found.
+   subroutine evaluate(pk, i, x, r, sq, inside, hint, scr, ok, by)
       type(packing_type), intent(in) :: pk
-      integer, intent(in) :: i
+      integer, intent(in) :: i, hint
       real(wp), intent(in) :: x(3), r(3, 3), sq
       logical, intent(in) :: inside
       type(fit_scratch_type), intent(inout) :: scr
       logical, intent(out) :: ok
+      integer, intent(out) :: by
       ok = .false.
+      by = 0
       if (.not. inside) return
-      ok = pk%fits(pk%kind_of(i), x, r, sq, scr, exclude=i)
+      ok = pk%fits(pk%kind_of(i), x, r, sq, scr, exclude=i, hint=hint, blocker=by)
    end subroutine evaluate
 
    !> The trial of particle i in sweep k: new centre x, rotation r and scale sc; typ 1

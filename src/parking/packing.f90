@@ -430,7 +430,7 @@ contains
    !> parked particle, as the shell mode says. With `since` (> 0), only the particles added or
    !> moved after that mark are tested, and the walls are not. With `exclude` (a parked particle's
    !> id: the trial pose of a move), that particle itself is skipped (its periodic images are not).
-   logical function fits(self, kn, x, rr, sc, scratch, since, exclude) result(ok)
+   logical function fits(self, kn, x, rr, sc, scratch, since, exclude, hint, blocker) result(ok)
       !> Packing.
       class(packing_type), intent(in) :: self
       !> Kind (built).
@@ -443,10 +443,20 @@ contains
       integer, intent(in), optional :: since
       !> Particle to skip (default: none).
       integer, intent(in), optional :: exclude
-      integer :: ncand, jmin, jskip
+      !> Particle tested first when it is a candidate (a likely overlap, e.g. the one that refused
+      !> the same particle's last trial); the answer does not depend on it.
+      integer, intent(in), optional :: hint
+      !> The particle an overlap was found with (0: none found by a pair test, e.g. a wall, a
+      !> certain overlap in the cell list, or ok).
+      integer, intent(out), optional :: blocker
+      integer :: ncand, jmin, jskip, jhint, jb
       logical :: hit, sorted
       integer :: order(max_sorted)
       ok = .false.
+      jb = 0
+      if (present(blocker)) blocker = 0
+      jhint = 0
+      if (present(hint)) jhint = hint
       jmin = 0
       if (present(since)) jmin = since
       jskip = 0
@@ -469,15 +479,22 @@ contains
          end if
          call live_candidates(self, scratch%cand, scratch%shift, ncand)
          call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order, sorted)
+         if (jhint > 0) call hint_first(scratch%cand, ncand, jhint, order, sorted)
          ! an overlap the first stages prove, with any candidate, before any pair near contact is
          ! certified (the answer is the same: the full test would report that overlap too)
          if (ncand >= 2) then
-            call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .true., .false., hit)
-            if (hit) return
+            call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .true., .false., hit, jb)
+            if (hit) then
+               if (present(blocker)) blocker = jb
+               return
+            end if
          end if
          ! the full tests (without the proofs just run, when they were)
-         call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .false., ncand >= 2, hit)
-         if (hit) return
+         call scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, .false., ncand >= 2, hit, jb)
+         if (hit) then
+            if (present(blocker)) blocker = jb
+            return
+         end if
       end associate
       ok = .true.
    end function fits
@@ -490,7 +507,7 @@ contains
    !> so that the full pass does not test them again. With proofs_done the full tests skip the
    !> early overlap proofs (the caller ran them on these pairs).
    pure subroutine scan_candidates(self, kq, bq, x, rr, sc, scratch, ncand, order, sorted, jskip, early, &
-                                   proofs_done, hit)
+                                   proofs_done, hit, jhit)
       type(packing_type), intent(in) :: self
       type(particle_kind_type), intent(in) :: kq
       !> The candidate's bare body (its kind's shared one).
@@ -500,10 +517,13 @@ contains
       integer, intent(in) :: ncand, order(:), jskip
       logical, intent(in) :: sorted, early, proofs_done
       logical, intent(out) :: hit
+      !> The particle of the overlap found.
+      integer, intent(out) :: jhit
       integer :: ii, i, j
       real(wp) :: xj(3), m
       logical :: apart, proved
       hit = .true.
+      jhit = 0
       do ii = 1, ncand
          i = ii
          if (sorted) i = order(ii)
@@ -516,6 +536,7 @@ contains
          associate (rj => self%rot(:, :, j), sj => self%scale(j), &
                     bj => self%kinds(body_holder(self%kinds, self%kind_of(j)))%body)
             m = pair_gap(self%p, kq, sc, self%kinds(self%kind_of(j)), sj)
+            jhit = j
             if (early) then
                call first_stages(bq, x, rr, sc, bj, xj, rj, sj, self%p%contact, proved, apart, margin=m)
                if (proved) return
@@ -602,6 +623,23 @@ contains
          order(m + 1) = oi
       end do
    end subroutine likely_first
+
+   !> Put the candidate that is particle jh first in a sorted test order (the others keep
+   !> theirs). Nothing when the list is not sorted (`likely_first`) or jh is not a candidate.
+   pure subroutine hint_first(cnd, ncand, jh, order, sorted)
+      integer, intent(in) :: cnd(:), ncand, jh
+      integer, intent(inout) :: order(max_sorted)
+      logical, intent(in) :: sorted
+      integer :: i, m
+      if (.not. sorted) return
+      do m = 1, ncand
+         if (cnd(order(m)) == jh) exit
+      end do
+      if (m > ncand .or. m == 1) return
+      i = order(m)
+      order(2:m) = order(1:m - 1)
+      order(1) = i
+   end subroutine hint_first
 
    !> Grow the particle arrays (double them; by half beyond gentle_growth).
    subroutine grow(self)
