@@ -13,7 +13,7 @@ summary table (`NAME-summary.csv`, row `total`):
 
 Both strategies use void placement, 2,000 locations and `max_failures = 100` (RSA's own stopping
 rule); the dense runs add `strategy = 'dense'`, `dense_sweeps = 4`, `dense_grow_scale = 0.7`,
-`dense_overfill = 0.2`, `contact_gap = 0.003` (as inputs/concrete.nml) and
+`dense_overfill = 0.2`, `contact_gap = 0.003`, `dense_max_failures = 400` (as inputs/concrete.nml) and
 `dense_time_limit = --time-limit` seconds. Each row gives the target, the total reached, the
 particles and the wall and CPU seconds of the run; each run's progress lines are kept in
 `WORK/GRADATION-STRATEGY.log`.
@@ -40,7 +40,8 @@ PARKING = {
     "rsa": "&parking max_locations = 2000, placement = 'void', max_failures = 100 /",
     "dense": ("&parking max_locations = 2000, placement = 'void', max_failures = 100,\n"
               "   strategy = 'dense', dense_rounds = 20, dense_sweeps = 4, dense_grow_scale = 0.7,\n"
-              "   dense_overfill = 0.2, contact_gap = 0.003, dense_time_limit = {limit} /"),
+              "   dense_overfill = 0.2, contact_gap = 0.003, dense_max_failures = 400,\n"
+              "   dense_time_limit = {limit} /"),
 }
 
 

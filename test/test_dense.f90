@@ -44,6 +44,8 @@ contains
               new_unittest("growth: same model for 1 and 2 threads", test_growth_threads), &
               new_unittest("overfill: the target reached, short spheres within the sieve, no overlap", &
                            test_overfill_spheres), &
+              new_unittest("dense_max_failures: RSA passes that fail more fill more, no overlap", &
+                           test_max_failures), &
               new_unittest("1 and 2 threads give the same dense model", test_threads)]
    end subroutine collect_dense
 
@@ -439,6 +441,29 @@ contains
       call verify_model(m, 40, rep)
       call check(error, rep%overlapping_pairs == 0_i8, "verify found overlapping spheres")
    end subroutine test_overfill_spheres
+
+   !> Spheres asked for 0.50 (beyond RSA's jamming limit 0.3841): with max_failures = 1 the strategy's
+   !> RSA passes end at the first sphere that exhausts its locations; dense_max_failures = 100 lets
+   !> them go on, and the same single round ends denser (by more than 0.02), without overlap.
+   subroutine test_max_failures(error)
+      type(error_type), allocatable, intent(out) :: error
+      type(model_type) :: a, b
+      character(len=*), parameter :: head = "&box length = 8, 8, 8 /"//new_line("a")// &
+                                            "&sieves nsieve = 1, min_width = 1.0, max_width = 1.2, fraction = 0.50, " &
+                                            //"source = 'sphere', order = 0 /"//new_line("a")// &
+                                            "&parking max_locations = 100, max_failures = 1, strategy = 'dense', " &
+                                            //"dense_rounds = 1, dense_sweeps = 2"
+      call run_nml("dense_fail1.nml", head//" /", a, error)
+      if (allocated(error)) return
+      call run_nml("dense_fail100.nml", head//", dense_max_failures = 100 /", b, error)
+      if (allocated(error)) return
+      print '(a,f7.4,a,f7.4)', "        fraction with 1 failure ", a%achieved_fraction(1), ", with 100 ", &
+         b%achieved_fraction(1)
+      call check(error, b%achieved_fraction(1) > a%achieved_fraction(1) + 0.02_wp, &
+                 "dense_max_failures did not let the RSA passes fill more")
+      if (allocated(error)) return
+      call check(error, sphere_gap(b) >= 0.0_wp, "spheres overlap")
+   end subroutine test_max_failures
 
    subroutine test_growth_threads(error)
       type(error_type), allocatable, intent(out) :: error

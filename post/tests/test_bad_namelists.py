@@ -93,6 +93,11 @@ def test_dense_overfill_out_of_range_is_named(anm_bin, tmp_path, value):
     refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: dense_overfill", "must be in [0, 1]")
 
 
+def test_dense_max_failures_negative_is_named(anm_bin, tmp_path):
+    text = GOOD + "&parking strategy = 'dense',\n  dense_max_failures = -1 /\n"
+    refused(anm_bin, tmp_path, text, "bad.nml:6: &parking: dense_max_failures = -1 must be >= 0")
+
+
 @pytest.mark.parametrize("value", ["0", "0.2", "-1e-3"])
 def test_contact_gap_out_of_range_is_named(anm_bin, tmp_path, value):
     text = GOOD + f"&parking max_locations = 100,\n  contact_gap = {value} /\n"

@@ -7,10 +7,10 @@
 !> (resolved to `contact_method%...`); placement 'uniform' or 'void' (resolved to `placement%...`);
 !> strategy 'rsa' or 'dense' (resolved to `parking_strategy%...`); dense_rounds, dense_sweeps >= 1;
 !> 0 < dense_target_acceptance < 1; dense_time_limit >= 0; 0 <= dense_grow_scale < 1;
-!> 0 <= dense_overfill <= 1; last_particle 'closer' or 'overshoot' (resolved to
+!> 0 <= dense_overfill <= 1; dense_max_failures >= 0; last_particle 'closer' or 'overshoot' (resolved to
 !> `last_particle%...`); sieve_carry 'rounding' or 'none' (resolved to `sieve_carry%...`). The
 !> strategy and the dense variables are dumped only for 'dense', contact_gap, dense_overfill,
-!> last_particle and sieve_carry only when not their default
+!> dense_max_failures, last_particle and sieve_carry only when not their default
 !> (a run's resolved text is unchanged by options it does not use).
 !>
 !> Usage:
@@ -104,6 +104,9 @@ module anm_config_parking
       !> Dense with growth: a round asks for its missing volume times (1 + dense_overfill); growth
       !> ends once the particles kept hold the sieve's volume.
       real(wp) :: dense_overfill = 0.0_wp
+      !> Dense: particles that may exhaust their attempts before an RSA pass of the dense strategy
+      !> ends (0: max_failures).
+      integer :: dense_max_failures = 0
       !> Rule for a sieve's last particle, one of `last_particle`.
       integer :: last_particle = last_particle%closer
       !> What a sieve that reached its target passes to the next one, one of `sieve_carry`.
@@ -126,11 +129,11 @@ contains
       character(len=32) :: contact_method
       character(len=16) :: placement, strategy, last_particle, sieve_carry
       logical :: certified
-      integer :: dense_rounds, dense_sweeps
+      integer :: dense_rounds, dense_sweeps, dense_max_failures
       real(wp) :: dense_target_acceptance, dense_time_limit, dense_grow_scale, dense_overfill, contact_gap
       namelist /parking/ max_locations, max_orientations, max_sizes, max_shapes, max_failures, contact_method, &
          n_ext, n_box, certified, contact_gap, placement, strategy, dense_rounds, dense_sweeps, dense_target_acceptance, &
-         dense_time_limit, dense_grow_scale, dense_overfill, last_particle, sieve_carry
+         dense_time_limit, dense_grow_scale, dense_overfill, dense_max_failures, last_particle, sieve_carry
       integer :: ig, stat
       character(len=512) :: msg
       character(len=max_line), allocatable :: lines(:)
@@ -153,6 +156,7 @@ contains
       dense_time_limit = self%dense_time_limit
       dense_grow_scale = self%dense_grow_scale
       dense_overfill = self%dense_overfill
+      dense_max_failures = self%dense_max_failures
       last_particle = last_particle_name(self%last_particle)
       sieve_carry = sieve_carry_name(self%sieve_carry)
       ig = find_group(nml, "parking")
@@ -173,6 +177,7 @@ contains
       call at_least("n_box", n_box, 2)
       call at_least("dense_rounds", dense_rounds, 1)
       call at_least("dense_sweeps", dense_sweeps, 1)
+      call at_least("dense_max_failures", dense_max_failures, 0)
       if (allocated(error)) return
       if (.not. (dense_target_acceptance > 0.0_wp .and. dense_target_acceptance < 1.0_wp)) then
          call config_error(error, nml, ig, "parking", "dense_target_acceptance", "= "//to_string(dense_target_acceptance) &
@@ -200,6 +205,7 @@ contains
       self%dense_time_limit = dense_time_limit
       self%dense_grow_scale = dense_grow_scale
       self%dense_overfill = dense_overfill
+      self%dense_max_failures = dense_max_failures
       self%max_locations = max_locations
       self%max_orientations = max_orientations
       self%max_sizes = max_sizes
@@ -401,6 +407,8 @@ contains
                 //to_string(self%dense_target_acceptance)//", dense_time_limit = "//to_string(self%dense_time_limit) &
                 //", dense_grow_scale = "//to_string(self%dense_grow_scale)
          if (self%dense_overfill > 0.0_wp) text = text//", dense_overfill = "//to_string(self%dense_overfill)
+         if (self%dense_max_failures > 0) text = text//", dense_max_failures = " &
+                                                 //to_string(self%dense_max_failures)
       end if
       if (self%contact_gap /= 1.0e-3_wp) text = text//", contact_gap = "//to_string(self%contact_gap)
       ! likewise the thesis' sieve-volume rules, only when chosen

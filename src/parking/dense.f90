@@ -1,5 +1,6 @@
 !> The dense strategy (`&parking strategy = 'dense'`, docs/dense.md): sieve by sieve, largest
-!> first, random sequential addition as anm_parking_rsa does it; when RSA ends a sieve short of its
+!> first, random sequential addition as anm_parking_rsa does it (with `max_failures` replaced by
+!> `dense_params_type%max_failures` when that is set); when RSA ends a sieve short of its
 !> target, rounds of relaxation sweeps (hard-particle Monte Carlo moves of the parked particles)
 !> and further RSA insertions follow until the target is reached, `rounds` rounds are spent or the
 !> wall-clock limit passes.
@@ -58,6 +59,9 @@ module anm_parking_dense
       !> Growth: a round asks RSA for its missing volume times (1 + overfill); the growth of a sieve
       !> ends once the particles it keeps hold its target volume, the rest at the size they reached.
       real(wp) :: overfill = 0.0_wp
+      !> Particles that may exhaust their attempts before one of the strategy's RSA passes ends
+      !> (0: the RSA parameters' max_failures).
+      integer :: max_failures = 0
       !> Shell layers given in mm (a particle short of its size would have a thinner shell).
       logical :: absolute_shells = .false.
       !> Relaxation-and-insertion rounds per sieve; sweeps per round.
@@ -134,12 +138,16 @@ contains
       type(sieve_result_type), allocatable :: r1(:)
       type(sieve_result_type) :: res, full
       type(attempt_params_type) :: a2
+      type(rsa_params_type) :: rq
       real(wp), allocatable :: tsc(:)
       real(wp) :: carry, target, f, request
       integer :: s, round, j, np0
       integer(i8) :: h, hh
       logical :: grow
       allocate (result(size(ap)), tsc(0))
+      ! the strategy's RSA passes: the failures they may spend
+      rq = rp
+      if (dp%max_failures > 0) rq%max_failures = dp%max_failures
       call new_move_state(ms, ap(:)%max_width)
       grow = dp%grow_scale > 0.0_wp
       f = merge(dp%grow_scale, 1.0_wp, grow)
@@ -147,7 +155,7 @@ contains
       do s = 1, size(ap)
          target = max(0.0_wp, target_fraction(s) * rp%vbox + carry)
          if (pk%ndead > 0) call pk%compact()
-         call park_rsa(pk, ks, ap(s:s), rp, [target / rp%vbox], r1, run, error)
+         call park_rsa(pk, ks, ap(s:s), rq, [target / rp%vbox], r1, run, error)
          if (allocated(error)) return
          call extend_targets(tsc, pk, 1.0_wp)
          res = r1(1)
@@ -174,7 +182,7 @@ contains
             request = (target - full%vol) * f**3 * (1.0_wp + dp%overfill)
             np0 = pk%np
             if (pk%ndead > 0) call pk%compact()
-            call park_rsa(pk, ks, [a2], rp, [request / rp%vbox], r1, run, error)
+            call park_rsa(pk, ks, [a2], rq, [request / rp%vbox], r1, run, error)
             if (allocated(error)) return
             call extend_targets(tsc, pk, 1.0_wp / f)
             if (grow .and. pk%np > np0) then

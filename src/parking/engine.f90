@@ -349,6 +349,7 @@ contains
       p%time_limit = cfg%parking%dense_time_limit
       p%grow_scale = cfg%parking%dense_grow_scale
       p%overfill = cfg%parking%dense_overfill
+      p%max_failures = cfg%parking%dense_max_failures
       p%absolute_shells = cfg%shells%nlayer > 0 .and. cfg%shells%unit == thickness_unit%mm
       p%nthreads = omp_get_max_threads()
    end function dense_params
