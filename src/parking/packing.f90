@@ -478,8 +478,7 @@ contains
             call self%cl%neighbours(x, sc * kq%r_out, scratch%cand, scratch%shift, ncand, hit, jmin=jmin)
          end if
          call live_candidates(self, scratch%cand, scratch%shift, ncand)
-         call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, order, sorted)
-         if (jhint > 0) call hint_first(scratch%cand, ncand, jhint, order, sorted)
+         call likely_first(self, kn, x, sc, scratch%cand, scratch%shift, ncand, jhint, order, sorted)
          ! an overlap the first stages prove, with any candidate, before any pair near contact is
          ! certified (the answer is the same: the full test would report that overlap too)
          if (ncand >= 2) then
@@ -587,12 +586,13 @@ contains
 
    !> The order in which to test the candidates: the most likely overlaps first, so that an
    !> attempt that fails usually fails at its first exact test. The key is where the centre
-   !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1).
+   !> distance lies between the certain-overlap and the bounding-sphere distances (0 to 1); the
+   !> candidate that is particle jh (a hint, 0 for none) comes first.
    !> Short lists are sorted (insertion sort, stable: `sorted`, order(1:ncand)); long ones are kept
    !> in their order (`sorted` false, order not set).
-   pure subroutine likely_first(self, kn, x, sc, cnd, shf, ncand, order, sorted)
+   pure subroutine likely_first(self, kn, x, sc, cnd, shf, ncand, jh, order, sorted)
       type(packing_type), intent(in) :: self
-      integer, intent(in) :: kn, ncand
+      integer, intent(in) :: kn, ncand, jh
       real(wp), intent(in) :: x(3), sc
       integer, intent(in) :: cnd(:)
       real(wp), intent(in) :: shf(:, :)
@@ -610,6 +610,7 @@ contains
          r_in = sc * self%kinds(kn)%r_in_query + self%scale(j) * self%kinds(self%kind_of(j))%r_in_parked
          r_out = sc * self%kinds(kn)%r_out + self%rho(j)
          key(i) = (norm2(self%center(:, j) + shf(:, i) - x) - r_in) / max(r_out - r_in, tiny(1.0_wp))
+         if (j == jh) key(i) = -huge(1.0_wp)
       end do
       do i = 2, ncand
          oi = order(i)
@@ -623,23 +624,6 @@ contains
          order(m + 1) = oi
       end do
    end subroutine likely_first
-
-   !> Put the candidate that is particle jh first in a sorted test order (the others keep
-   !> theirs). Nothing when the list is not sorted (`likely_first`) or jh is not a candidate.
-   pure subroutine hint_first(cnd, ncand, jh, order, sorted)
-      integer, intent(in) :: cnd(:), ncand, jh
-      integer, intent(inout) :: order(max_sorted)
-      logical, intent(in) :: sorted
-      integer :: i, m
-      if (.not. sorted) return
-      do m = 1, ncand
-         if (cnd(order(m)) == jh) exit
-      end do
-      if (m > ncand .or. m == 1) return
-      i = order(m)
-      order(2:m) = order(1:m - 1)
-      order(1) = i
-   end subroutine hint_first
 
    !> Grow the particle arrays (double them; by half beyond gentle_growth).
    subroutine grow(self)
