@@ -61,6 +61,10 @@ module anm_mpi_distributor
       !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
       !> the gathers (s).
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
+      !> The dense strategy's sweeps: batches of trials shared (one reduction each), trials, bytes
+      !> reduced by each process, wall time in those reductions (s).
+      integer(int64) :: sweep_batches = 0, sweep_trials = 0, sweep_bytes = 0
+      real(wp) :: sweep_wall = 0.0_wp
    end type comm_stats_type
 
    !> The load balance of the slabs: this process' busy time (its share of the spatial searches,
@@ -84,9 +88,8 @@ module anm_mpi_distributor
 
    !> Phase 1 over the processes of a communicator.
    type, extends(phase1_distributor_type) :: mpi_distributor_type
-      !> Communicator, this process' rank and the number of processes.
+      !> Communicator (this process' rank and the number of processes are the parent's).
       type(MPI_Comm) :: comm
-      integer :: rank = 0, nranks = 1
       !> Counters (allocated when counting; a pointer, so that the collective calls, which take
       !> the distributor as intent(in), can count).
       type(comm_stats_type), pointer :: stats => null()
@@ -99,6 +102,7 @@ module anm_mpi_distributor
       procedure :: note_slab
       procedure :: kinds_exchange
       procedure :: balance
+      procedure :: share_outcomes
    end type mpi_distributor_type
 
 contains
@@ -255,6 +259,30 @@ contains
                                                                            + 8_int64 * size(k)
       end if
    end subroutine agree_first
+
+   !> The outcomes of a batch of trials evaluated in shares (the dense strategy's sweeps;
+   !> collective): member b was evaluated by process mod(b - 1, nranks); one MPI_Allreduce(MIN) of
+   !> 8 bytes per member leaves every member's outcome on every process.
+   subroutine share_outcomes(self, code)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> Outcome of each member; this process' members are set, the others are filled in.
+      integer(int64), intent(inout) :: code(:)
+      integer :: b
+      real(wp) :: w0
+      if (self%nranks == 1) return
+      do b = 1, size(code)
+         if (mod(b - 1, self%nranks) /= self%rank) code(b) = huge(code)
+      end do
+      w0 = MPI_Wtime()
+      call MPI_Allreduce(MPI_IN_PLACE, code, size(code), MPI_INTEGER8, MPI_MIN, self%comm)
+      if (associated(self%stats)) then
+         self%stats%sweep_wall = self%stats%sweep_wall + (MPI_Wtime() - w0)
+         self%stats%sweep_batches = self%stats%sweep_batches + 1
+         self%stats%sweep_trials = self%stats%sweep_trials + size(code)
+         self%stats%sweep_bytes = self%stats%sweep_bytes + 8_int64 * size(code)
+      end if
+   end subroutine share_outcomes
 
    !> Every 32 batches (collective): when the processes' busy times differ by more
    !> than 10 % (largest over mean), the slab bounds move to where the work, taken as uniform
@@ -434,6 +462,10 @@ contains
             if (allocated(dist%bal%bounds)) write (unit, '("mpi: slab bounds along x (mm) after the last move:",' // &
                                                    '*(1x,f0.3))') dist%bal%bounds
          end if
+         if (st%sweep_batches > 0) write (unit, '("mpi: dense sweeps: ",i0," batches of trials evaluated in ",' // &
+                                          '"shares, ",i0," trials, ",i0," bytes reduced by each rank (MPI_Allreduce ",' // &
+                                          '"MIN, 8 bytes per trial), ",f0.2," s wall in those reductions")') &
+            st%sweep_batches, st%sweep_trials, st%sweep_bytes, st%sweep_wall
          call cpu_time(cpu)
          write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
                 '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu

@@ -281,3 +281,82 @@ def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp
         assert re.search(shares + r"[1-9]\d* received", res.stderr), res.stderr
         cmp = compare(tmp_path / "serial" / "model.h5", out / "model.h5")
         assert cmp.returncode == 0, f"{ranks} ranks {extra}:\n" + cmp.stdout + cmp.stderr
+
+
+def concrete_fines_nml(shapes_dir, out, box=6.0, nfine=3, first_fraction=0.45):
+    """inputs/concrete.nml reduced to a test's size: its `nfine` finest sieves (widths, orders and
+    shapes as committed) in a periodic box of `box` mm, the first of them asked for
+    `first_fraction` (it stands in for the coarser sieves: 0.61 of the box in all, beyond RSA, so
+    that the rounds and the growth run), the others for their committed fractions; its &parking
+    group as committed except that no wall-clock limit ends the search (a limit would end serial
+    and parallel runs at different points) and at most two rounds per sieve run."""
+    text = (ROOT / "inputs" / "concrete.nml").read_text()
+    body = "\n".join(line.split("!")[0] for line in text.splitlines())
+
+    def values(name):
+        m = re.search(rf"\b{name}\s*=\s*([^\n]*)", body)
+        assert m, name
+        return [v.strip() for v in m.group(1).split(",") if v.strip()]
+
+    def last(name):
+        return ", ".join(values(name)[-nfine:])
+
+    fractions = ", ".join([str(first_fraction)] + values("fraction")[-nfine + 1:])
+
+    parking = re.search(r"&parking\b.*?/", body, re.S).group(0)
+    parking = re.sub(r"dense_time_limit\s*=\s*[\d.]+", "dense_time_limit = 0", parking)
+    parking = re.sub(r"dense_rounds\s*=\s*\d+", "dense_rounds = 2", parking)
+    assert "strategy = 'dense'" in parking and "dense_time_limit = 0" in parking, parking
+    fine = re.search(r"'[^']*/(MA107-6-fine)'", body).group(1)
+    return (f"&box length = {box}, {box}, {box}, periodic = .true. /\n"
+            f"&sieves\n   nsieve = {nfine}\n   min_width = {last('min_width')}\n"
+            f"   max_width = {last('max_width')}\n   fraction = {fractions}\n"
+            f"   source = {nfine}*'{shapes_dir}/{fine}'\n   order = {last('order')}\n/\n"
+            f"{parking}\n&output directory = '{out}', name = 'model', vrml = .false. /\n&run seed = 1 /\n")
+
+
+def test_mpi_concrete_namelist_fines_are_the_serial_model(mpi_bin, anm_bin, shapes_dir, tmp_path):
+    """The concrete namelist's dense strategy (growth, overfill, contact gap, the failures its RSA
+    passes may spend) on its three finest sieves in a 6 mm box at 0.61 (`concrete_fines_nml`):
+    2 ranks x 1 thread and 3 ranks x 1 thread, whose ranks evaluate the sweeps' trials in shares
+    (`--comm-stats`: "dense sweeps"), give the serial model file (2 threads) dataset by dataset."""
+    def write(out):
+        out.mkdir()
+        nml = out / "job.nml"
+        nml.write_text(concrete_fines_nml(shapes_dir, out))
+        return nml
+    ser = write(tmp_path / "serial")
+    res = subprocess.run([anm_bin, "run", str(ser)], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, OMP_NUM_THREADS="2"))
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "growth ended" in res.stderr, res.stderr
+    for ranks in (2, 3):
+        out = tmp_path / f"np{ranks}"
+        res = run_mpi(mpi_bin, ranks, 1, ["run", str(write(out)), "--comm-stats"])
+        assert res.returncode == 0, res.stdout + res.stderr
+        shared = re.search(r"mpi: dense sweeps: (\d+) batches of trials evaluated in shares, (\d+) trials", res.stderr)
+        assert shared and int(shared.group(2)) > 1000, res.stderr
+        cmp = compare(tmp_path / "serial" / "model.h5", out / "model.h5")
+        assert cmp.returncode == 0, f"{ranks} ranks:\n" + cmp.stdout + cmp.stderr
+
+
+def test_mpi_dense_time_limit_is_decided_alike_on_every_rank(mpi_bin, anm_bin, shapes_dir, tmp_path):
+    """With a wall-clock limit (`dense_time_limit`, which the concrete namelists set), the ranks
+    take the longest of their clocks, so that all end the search at the same point: a run of the
+    reduced concrete job on 2 ranks cut short after 2 s ends with exit 0, the summary's particle
+    count and fractions are those of the file the ranks wrote together, and the serial audit
+    finds no overlap in it."""
+    text = concrete_fines_nml(shapes_dir, tmp_path).replace("dense_time_limit = 0", "dense_time_limit = 2")
+    nml = tmp_path / "job.nml"
+    nml.write_text(text)
+    res = run_mpi(mpi_bin, 2, 1, ["run", str(nml)])
+    assert res.returncode == 0, res.stdout + res.stderr
+    total = re.search(r"^total\s+([\d.]+)\s+([\d.]+)\s+(\d+)", res.stdout, re.M)
+    assert total, res.stdout
+    # cut short: the job asks 0.61, which the rounds and growth reach only after about 15 s
+    assert float(total.group(2)) < 0.605, res.stdout
+    with h5py.File(tmp_path / "model.h5", "r") as f:
+        assert f["particles/center"].shape[0] == int(total.group(3))
+    v = subprocess.run([anm_bin, "verify", str(tmp_path / "model.h5"), "--resolution", "16"],
+                       capture_output=True, text=True, timeout=600)
+    assert v.returncode == 0 and re.search(r"overlapping pairs:\s+0\n", v.stdout), v.stdout + v.stderr

@@ -19,7 +19,12 @@
 !> Trials are evaluated in batches in parallel against the frozen packing, then committed in id
 !> order; a trial whose bounding sphere meets the old or new bounding sphere of a move committed
 !> earlier in the batch is re-evaluated against the current packing. The sweep thus equals the
-!> serial sweep, for any batch size and thread count. Each RSA round draws its particles from the
+!> serial sweep, for any batch size and thread count. On several processes (the MPI build, with
+!> replicated data) every process draws every trial of a batch, evaluates its share of them (member
+!> b on process mod(b - 1, processes)) and one collective `share_outcomes` gives every process every
+!> outcome; the in-order commits then run alike on every process, so the sweep is the serial one
+!> for any number of processes too, and so is the wall-clock limit's decision (the longest clock
+!> of the processes). Each RSA round draws its particles from the
 !> sieve's streams under a seed derived from (seed, round).
 !>
 !> Usage:
@@ -34,6 +39,7 @@ module anm_parking_dense
    use anm_parking_packing, only: packing_type, fit_scratch_type
    use anm_parking_attempts, only: attempt_params_type
    use anm_parking_rsa, only: park_rsa, rsa_params_type, sieve_result_type, run_state_type
+   use anm_parking_scheduler, only: phase1_distributor_type
    use omp_lib, only: omp_get_thread_num, omp_get_max_threads
    implicit none
    private
@@ -161,14 +167,14 @@ contains
          res = r1(1)
          round = 0
          do while (.not. res%reached .and. round < dp%rounds)
-            if (out_of_time(dp, run)) exit
+            if (out_of_time(dp, run, rp%dist)) exit
             round = round + 1
             ! the moves test many pairs near contact: every body gets its support table
             call ks%add_tables(pk%kinds, run%attempts, now=.true.)
             ! the sieve and the one before move: they open room for the next insertions (larger
             ! particles are settled, and moving them among many small ones is costly)
             do j = 1, dp%sweeps
-               call relax_sweep(pk, ms, dp, tsc, first_sieve=max(1, s - 1))
+               call relax_sweep(pk, ms, dp, tsc, first_sieve=max(1, s - 1), dist=rp%dist)
             end do
             a2 = ap(s)
             h = int(s, i8) * 65536_i8 + round
@@ -187,13 +193,14 @@ contains
             call extend_targets(tsc, pk, 1.0_wp / f)
             if (grow .and. pk%np > np0) then
                do j = 1, dp%sweeps
-                  call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
+                  call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true., dist=rp%dist)
                end do
             end if
             full = sieve_totals(pk, s, tsc)
             if (grow .and. close_enough(full, target)) then
                ! enough particles once grown: grow them; those that cannot grow go (next round)
-               call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run)
+               call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run, &
+                                  rp%dist)
                call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
                full = sieve_totals(pk, s, tsc)
             end if
@@ -202,7 +209,7 @@ contains
             call round_line(rp, ms, s, round, res, full, target)
          end do
          if (grow) then
-            call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run)
+            call finish_growth(pk, ms, dp, tsc, s, ap(s)%min_width, target, rp%progress_unit, rp%vbox, run, rp%dist)
             call settle_growth(pk, tsc, s, ap(s)%min_width, dp%absolute_shells)
             res = sieve_totals(pk, s)
             res%reached = close_enough(res, target)
@@ -221,15 +228,21 @@ contains
       yes = res%vol >= target - max(0.5_wp * res%vol / max(1, res%count), round_tolerance * target)
    end function close_enough
 
-   !> Whether the run has passed the wall-clock limit `dp%time_limit` (never when it is 0).
-   logical function out_of_time(dp, run) result(late)
+   !> Whether the run has passed the wall-clock limit `dp%time_limit` (never when it is 0). On
+   !> several processes (`dist`; collective) the longest of their clocks decides, so that all take
+   !> the same branch.
+   logical function out_of_time(dp, run, dist) result(late)
       type(dense_params_type), intent(in) :: dp
       type(run_state_type), intent(in) :: run
+      class(phase1_distributor_type), intent(in), optional :: dist
       integer(i8) :: t1
+      real(wp) :: elapsed
       late = .false.
       if (dp%time_limit <= 0.0_wp) return
       call system_clock(t1)
-      late = real(t1 - run%t0, wp) / run%rate > dp%time_limit
+      elapsed = real(t1 - run%t0, wp) / run%rate
+      if (present(dist)) elapsed = dist%agree(elapsed)
+      late = elapsed > dp%time_limit
    end function out_of_time
 
    !> Targets of the particles parked since the last call: scale times `factor` (1: at full size).
@@ -308,7 +321,7 @@ contains
    !> limit has passed); only the particles still short and their neighbours move.
    !> A progress line (on `unit` >= 0) gives the sweeps done, the particles still short and the
    !> sieve's fraction.
-   subroutine finish_growth(pk, ms, dp, tsc, s, min_width, target, unit, vbox, run)
+   subroutine finish_growth(pk, ms, dp, tsc, s, min_width, target, unit, vbox, run, dist)
       type(packing_type), intent(inout) :: pk
       type(move_state_type), intent(inout) :: ms
       type(dense_params_type), intent(in) :: dp
@@ -316,6 +329,7 @@ contains
       integer, intent(in) :: s, unit
       real(wp), intent(in) :: min_width, target, vbox
       type(run_state_type), intent(in) :: run
+      class(phase1_distributor_type), intent(in), optional :: dist
       integer :: j, idle, nshort
       real(wp) :: vol, kept, best
       best = 0.0_wp
@@ -327,7 +341,8 @@ contains
                " particles short of their size, fraction ", vol / vbox
             flush (unit)
          end if
-         if (nshort == 0 .or. kept >= target .or. out_of_time(dp, run)) exit
+         if (nshort == 0 .or. kept >= target) exit
+         if (out_of_time(dp, run, dist)) exit
          if (vol > best * (1.0_wp + 1.0e-4_wp)) then
             best = vol
             idle = 0
@@ -335,7 +350,7 @@ contains
             idle = idle + 1
             if (idle >= 10) exit
          end if
-         call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true.)
+         call relax_sweep(pk, ms, dp, tsc, first_sieve=s, near_short=.true., dist=dist)
       end do
       call growth_state(pk, tsc, s, min_width, dp%absolute_shells, nshort, vol, kept)
       if (unit >= 0 .and. j > 1) then
@@ -379,7 +394,7 @@ contains
    !> retired. With `target` (scale per particle id), a particle below
    !> its target tries a growth step in half of its trials (`propose`).
    !> Length: about 90 lines; the batch's parallel trial and in-order commit belong together.
-   subroutine relax_sweep(pk, ms, dp, target, first_sieve, near_short)
+   subroutine relax_sweep(pk, ms, dp, target, first_sieve, near_short, dist)
       !> Packing.
       type(packing_type), intent(inout) :: pk
       !> Move sizes and counters.
@@ -392,11 +407,16 @@ contains
       integer, intent(in), optional :: first_sieve
       !> Only particles below their target scale and their neighbours move (default false).
       logical, intent(in), optional :: near_short
+      !> Processes that share the trials (the MPI build; collective): each evaluates the batch
+      !> members `rank` + 1, `rank` + 1 + `nranks`, ... and `share_outcomes` gives every process
+      !> every outcome; the commits then run alike everywhere. Absent: this process alone.
+      class(phase1_distributor_type), intent(in), optional :: dist
       type(fit_scratch_type), allocatable :: scr(:)
       real(wp), allocatable :: xn(:, :), rn(:, :, :), sq(:), cx(:, :), cr(:), tg(:)
       logical, allocatable :: ok(:), inside(:)
       integer, allocatable :: typ(:), act(:), by(:)
-      integer :: nb, i0, n, b, i, t, nc, s, np, s0, na
+      integer(i8), allocatable :: code(:)
+      integer :: nb, i0, n, b, i, t, nc, s, np, s0, na, first, stride, workers
       integer(i8) :: k
       real(wp) :: rb
       ms%sweep = ms%sweep + 1
@@ -422,24 +442,41 @@ contains
       ! refusers by id: entries of removed or new particles are only hints
       if (size(ms%blk) /= np) ms%blk = [ms%blk(:min(np, size(ms%blk))), (0, i=size(ms%blk) + 1, np)]
       na = size(act)
+      first = 1
+      stride = 1
+      workers = dp%nthreads
+      if (present(dist)) then
+         first = dist%rank + 1
+         stride = dist%nranks
+         workers = dist%workers
+      end if
       nb = dp%batch
-      if (nb <= 0) nb = 32 * max(1, dp%nthreads)
+      if (nb <= 0) nb = 32 * max(1, workers)
       allocate (scr(0:omp_get_max_threads() - 1), xn(3, nb), rn(3, 3, nb), sq(nb), ok(nb), inside(nb), &
-                typ(nb), by(nb))
+                typ(nb), by(nb), code(nb))
       ! committed moves of the batch: old and new centres, bounding radius
       allocate (cx(3, 2 * nb), cr(2 * nb))
       i0 = 0
       do while (i0 < na)
          n = min(nb, na - i0)
-         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, by, n, i0, k, scr, tg, act) &
-         !$omp private(b, i, t) schedule(dynamic, 1)
+         ! every process draws every trial (cheap); it evaluates its share of them
+         !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, by, n, i0, k, scr, tg, act, &
+         !$omp first, stride) private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
             i = act(i0 + b)
             call propose(pk, ms, dp%seed, k, i, tg(i), xn(:, b), rn(:, :, b), sq(b), typ(b), inside(b))
+            if (mod(b - first, stride) /= 0) cycle
             t = omp_get_thread_num()
             call evaluate(pk, i, xn(:, b), rn(:, :, b), sq(b), inside(b), ms%blk(i), scr(t), ok(b), by(b))
          end do
          !$omp end parallel do
+         if (stride > 1) then
+            ! outcome code: -1 fits, else the refuser (0: none)
+            code(:n) = merge(-1_i8, int(by(:n), i8), ok(:n))
+            call dist%share_outcomes(code(:n))
+            ok(:n) = code(:n) == -1_i8
+            by(:n) = int(max(0_i8, code(:n)))
+         end if
          nc = 0
          do b = 1, n
             i = act(i0 + b)

@@ -79,6 +79,9 @@ module anm_parking_scheduler
       !> `spatial_search`; else replicated data.
       logical :: spatial = .false.
       integer :: nslab = 1, slab = 0
+      !> This process' rank (0-based) and the number of processes: with replicated data a batch's
+      !> members b = rank + 1, rank + 1 + nranks, ... run on this process.
+      integer :: rank = 0, nranks = 1
    contains
       !> Phase 1 of the batch `at` on every process (collective).
       procedure(distributed_phase1), deferred :: phase1
@@ -95,6 +98,10 @@ module anm_parking_scheduler
       !> Between batches (collective in spatial mode): move the slabs so that the processes'
       !> work evens out (this default: never). The slabs never change the model.
       procedure :: balance
+      !> The outcomes of a batch of trials that the processes evaluated in shares (collective):
+      !> entry b holds, on return, the value of the process that evaluated member b (this default,
+      !> one process: unchanged).
+      procedure :: share_outcomes
    end type phase1_distributor_type
 
    abstract interface
@@ -143,6 +150,15 @@ contains
       !> This process' packing.
       type(packing_type), intent(inout) :: pk
    end subroutine balance
+
+   !> Default of `share_outcomes`: one process evaluated every member.
+   subroutine share_outcomes(self, code)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> Outcome of each member; this process' members (`rank` + 1, `rank` + 1 + `nranks`, ...)
+      !> are set, the others are filled in.
+      integer(i8), intent(inout) :: code(:)
+   end subroutine share_outcomes
 
    !> Default of `kinds_exchange`: none (every process builds every kind it needs).
    subroutine kinds_exchange(self, kx)
