@@ -12,6 +12,7 @@ Usage (from the repository root; builds with scripts/build.sh and scripts/build_
     python3 bench/mpi_bench.py [--job inputs/msand.nml] [--slabs 2 4 8 16 32 64] [--halo-only MODEL.h5]
                                [--serial-threads 2] [--no-halo]
     python3 bench/mpi_bench.py --project CPU PHASE1_CPU PARTICLES PEAK_MB SLAB_SHARE   # the scaling model only
+    python3 bench/mpi_bench.py --project-dense CPU SHARED_CPU PARTICLES PEAK_MB        # the same, dense strategy
 
 Prints markdown tables (pasted into docs/mpi.md). Jobs with ../shared/shapes need the folder.
 """
@@ -128,13 +129,15 @@ def block_halo(edges: list[float], reach: float) -> float:
     return 2.0 * reach * sum(1.0 / a for a in edges)
 
 
-def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_share: float,
+def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_share: float | None,
                cores_per_node: int = 64, ranks_per_node: int = 2, efficiency: float = 0.8,
                decision_share: float = 0.1, reach: float = 0.56, array_bytes: float = 128.0) -> str:
     """The scaling model of docs/mpi.md from measured figures: CPU seconds of the job on one rank
-    and one thread, the phase-1 CPU seconds within it when replicated (`--comm-stats`), its particle
-    count and peak memory per rank, and the share of the one-core time that every rank repeats
-    with slabs (measured: a rank's CPU outside phase 1 over the one-core CPU)."""
+    and one thread, the CPU seconds within it that the ranks share when replicated (RSA's phase 1,
+    and with the dense strategy the sweeps' trials: `--comm-stats`), its particle count and peak
+    memory per rank, and the share of the one-core time that every rank repeats with slabs
+    (measured: a rank's CPU outside phase 1 over the one-core CPU; None for the dense strategy,
+    which runs replicated: no slab column)."""
     per_particle = cpu1 / n_ref
     rho = 1.0 - phase1 / cpu1
     volume = 100.0 ** 3
@@ -146,31 +149,50 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_shar
     work = n * per_particle
     mem_gb = peak_mb * n / n_ref / 1024.0
     arrays_gb = array_bytes * n / 1024.0 ** 3
-    lines = [f"Measured: {per_particle * 1e6:.0f} us CPU per particle (one rank, one thread); replicated, phase 1 "
-             f"is {1 - rho:.2f} of it and the rest (rho = {rho:.2f}) is repeated by every rank; with slabs, every "
-             f"rank repeats {slab_share:.2f}. The 100 mm concrete cube to 0.15 mm: {n / 1e6:.1f} million particles "
-             f"({', '.join(f'{c:,.0f}' for c in counts)} per sieve, coarse to fine), {work / 60:.0f} min CPU at "
+    dense = slab_share is None
+    shared = "RSA's phase 1 and the sweeps' trials are" if dense else "phase 1 is"
+    slabs = "" if dense else f"; with slabs, every rank repeats {slab_share:.2f}"
+    cost = f"{per_particle * 1e3:.2f} ms" if dense else f"{per_particle * 1e6:.0f} us"
+    lines = [f"Measured: {cost} CPU per particle (one rank, one thread); replicated, {shared} "
+             f"{1 - rho:.2f} of it and the rest (rho = {rho:.2f}) is repeated by every rank{slabs}. The 100 mm "
+             f"concrete cube to 0.15 mm: {n / 1e6:.1f} million particles "
+             f"({', '.join(f'{c:,.0f}' for c in counts)} per sieve, coarse to fine), {duration(work)} CPU at "
              f"that cost; the whole model's memory about {mem_gb:.0f} GB, of which the particle arrays "
-             f"{arrays_gb:.1f} GB.", "",
-             "| nodes | ranks x threads | replicated | slabs (built) | designed: blocks, divided arrays and kinds | "
-             "memory per rank: replicated / slabs (halo) / designed (blocks, halo) |",
-             "|---:|---:|---:|---:|---:|---:|"]
+             f"{arrays_gb:.1f} GB.", ""]
+    if dense:
+        lines += ["| nodes | ranks x threads | replicated, trials shared (built) | designed: checkerboard slabs or "
+                  "blocks, divided arrays and kinds | memory per rank: replicated / designed (blocks, halo) |",
+                  "|---:|---:|---:|---:|---:|"]
+    else:
+        lines += ["| nodes | ranks x threads | replicated | slabs (built) | designed: blocks, divided arrays and kinds | "
+                  "memory per rank: replicated / slabs (halo) / designed (blocks, halo) |",
+                  "|---:|---:|---:|---:|---:|---:|"]
     blocks = {1: [50.0, 100.0, 100.0], 8: [25.0, 50.0, 50.0], 64: [12.5, 25.0, 25.0]}
     for nodes in (1, 8, 64):
         cores = nodes * cores_per_node
         ranks = ranks_per_node * nodes
         spread = cores * efficiency
         t_rep = rho * work + (1 - rho) * work / spread
-        t_slab = slab_share * work + (1 - slab_share) * work / spread
         t_sp = decision_share * rho * work + (1 - decision_share * rho) * work / spread
         h = block_halo(blocks[nodes], reach)
+        mem_sp = mem_gb / ranks * (1 + h)
+        edges = ' x '.join(f'{e:g}' for e in blocks[nodes])
+        if dense:
+            lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {duration(t_rep)} | {duration(t_sp)} | "
+                         f"{mem_gb:.0f} GB / {mem_sp:.2f} GB ({edges} mm, {h:.2f}) |")
+            continue
+        t_slab = slab_share * work + (1 - slab_share) * work / spread
         h_slab = 2.0 * reach / (100.0 / ranks)
         mem_slab = arrays_gb + (mem_gb - arrays_gb) / ranks * (1 + h_slab)
-        mem_sp = mem_gb / ranks * (1 + h)
         lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {t_rep / 60:.1f} min | {t_slab / 60:.1f} min | "
                      f"{t_sp / 60:.2f} min | {mem_gb:.0f} GB / {mem_slab:.1f} GB ({h_slab:.2f}) / {mem_sp:.2f} GB "
-                     f"({' x '.join(f'{e:g}' for e in blocks[nodes])} mm, {h:.2f}) |")
+                     f"({edges} mm, {h:.2f}) |")
     return "\n".join(lines)
+
+
+def duration(seconds: float) -> str:
+    """Seconds as minutes below two hours, else hours."""
+    return f"{seconds / 60:.1f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
 
 
 def main() -> int:
@@ -185,10 +207,17 @@ def main() -> int:
     ap.add_argument("--project", type=float, nargs=5,
                     metavar=("CPU", "PHASE1_CPU", "PARTICLES", "PEAK_MB", "SLAB_SHARE"),
                     help="only the scaling model from measured figures (docs/mpi.md)")
+    ap.add_argument("--project-dense", type=float, nargs=4, metavar=("CPU", "SHARED_CPU", "PARTICLES", "PEAK_MB"),
+                    help="only the scaling model of the dense strategy (replicated; SHARED_CPU: what the ranks "
+                         "share, RSA's phase 1 and the sweeps' trials, one-core seconds)")
     args = ap.parse_args()
     if args.project:
         c1, c2, n_ref, peak, share = args.project
         print(projection(c1, c2, int(n_ref), peak, share))
+        return 0
+    if args.project_dense:
+        c1, c2, n_ref, peak = args.project_dense
+        print(projection(c1, c2, int(n_ref), peak, None))
         return 0
     if args.halo_only:
         print(halo_table(Path(args.halo_only), args.slabs))

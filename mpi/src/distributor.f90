@@ -62,9 +62,10 @@ module anm_mpi_distributor
       !> the gathers (s).
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
       !> The dense strategy's sweeps: batches of trials shared (one reduction each), trials, bytes
-      !> reduced by each process, wall time in those reductions (s).
+      !> reduced by each process, wall time in those reductions and CPU time this process spent
+      !> evaluating its share of the trials (s).
       integer(int64) :: sweep_batches = 0, sweep_trials = 0, sweep_bytes = 0
-      real(wp) :: sweep_wall = 0.0_wp
+      real(wp) :: sweep_wall = 0.0_wp, sweep_cpu = 0.0_wp
    end type comm_stats_type
 
    !> The load balance of the slabs: this process' busy time (its share of the spatial searches,
@@ -263,11 +264,13 @@ contains
    !> The outcomes of a batch of trials evaluated in shares (the dense strategy's sweeps;
    !> collective): member b was evaluated by process mod(b - 1, nranks); one MPI_Allreduce(MIN) of
    !> 8 bytes per member leaves every member's outcome on every process.
-   subroutine share_outcomes(self, code)
+   subroutine share_outcomes(self, code, busy)
       !> Distributor.
       class(mpi_distributor_type), intent(in) :: self
       !> Outcome of each member; this process' members are set, the others are filled in.
       integer(int64), intent(inout) :: code(:)
+      !> CPU seconds this process spent evaluating its members.
+      real(wp), intent(in) :: busy
       integer :: b
       real(wp) :: w0
       if (self%nranks == 1) return
@@ -278,6 +281,7 @@ contains
       call MPI_Allreduce(MPI_IN_PLACE, code, size(code), MPI_INTEGER8, MPI_MIN, self%comm)
       if (associated(self%stats)) then
          self%stats%sweep_wall = self%stats%sweep_wall + (MPI_Wtime() - w0)
+         self%stats%sweep_cpu = self%stats%sweep_cpu + busy
          self%stats%sweep_batches = self%stats%sweep_batches + 1
          self%stats%sweep_trials = self%stats%sweep_trials + size(code)
          self%stats%sweep_bytes = self%stats%sweep_bytes + 8_int64 * size(code)
@@ -464,8 +468,9 @@ contains
          end if
          if (st%sweep_batches > 0) write (unit, '("mpi: dense sweeps: ",i0," batches of trials evaluated in ",' // &
                                           '"shares, ",i0," trials, ",i0," bytes reduced by each rank (MPI_Allreduce ",' // &
-                                          '"MIN, 8 bytes per trial), ",f0.2," s wall in those reductions")') &
-            st%sweep_batches, st%sweep_trials, st%sweep_bytes, st%sweep_wall
+                                          '"MIN, 8 bytes per trial), ",f0.2," s wall in those reductions; ",' // &
+                                          '"rank 0 evaluated its share in ",f0.2," s CPU")') &
+            st%sweep_batches, st%sweep_trials, st%sweep_bytes, st%sweep_wall, st%sweep_cpu
          call cpu_time(cpu)
          write (unit, '("mpi: rank 0: phase 1 ",f0.2," s CPU (",f0.2," s wall), waiting in the gathers ",f0.2,' // &
                 '" s wall; the whole process ",f0.2," s CPU")') st%phase1_cpu, st%phase1_wall, st%gather_wall, cpu

@@ -419,6 +419,7 @@ contains
       integer :: nb, i0, n, b, i, t, nc, s, np, s0, na, first, stride, workers
       integer(i8) :: k
       real(wp) :: rb
+      real :: c0, c1
       ms%sweep = ms%sweep + 1
       k = ms%sweep
       ms%nt = 0
@@ -460,6 +461,7 @@ contains
       do while (i0 < na)
          n = min(nb, na - i0)
          ! every process draws every trial (cheap); it evaluates its share of them
+         if (stride > 1) call cpu_time(c0)
          !$omp parallel do default(none) shared(pk, ms, dp, xn, rn, sq, ok, inside, typ, by, n, i0, k, scr, tg, act, &
          !$omp first, stride) private(b, i, t) schedule(dynamic, 1)
          do b = 1, n
@@ -471,9 +473,10 @@ contains
          end do
          !$omp end parallel do
          if (stride > 1) then
+            call cpu_time(c1)
             ! outcome code: -1 fits, else the refuser (0: none)
             code(:n) = merge(-1_i8, int(by(:n), i8), ok(:n))
-            call dist%share_outcomes(code(:n))
+            call dist%share_outcomes(code(:n), real(c1 - c0, wp))
             ok(:n) = code(:n) == -1_i8
             by(:n) = int(max(0_i8, code(:n)))
          end if

@@ -152,12 +152,14 @@ contains
    end subroutine balance
 
    !> Default of `share_outcomes`: one process evaluated every member.
-   subroutine share_outcomes(self, code)
+   subroutine share_outcomes(self, code, busy)
       !> Distributor.
       class(phase1_distributor_type), intent(in) :: self
       !> Outcome of each member; this process' members (`rank` + 1, `rank` + 1 + `nranks`, ...)
       !> are set, the others are filled in.
       integer(i8), intent(inout) :: code(:)
+      !> CPU seconds this process spent evaluating its members (counted by distributors that count).
+      real(wp), intent(in) :: busy
    end subroutine share_outcomes
 
    !> Default of `kinds_exchange`: none (every process builds every kind it needs).
