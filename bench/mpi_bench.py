@@ -191,8 +191,8 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_shar
 
 
 def duration(seconds: float) -> str:
-    """Seconds as minutes below two hours, else hours."""
-    return f"{seconds / 60:.1f} min" if seconds < 7200 else f"{seconds / 3600:.1f} h"
+    """Seconds as minutes below an hour, else hours."""
+    return f"{seconds / 60:.1f} min" if seconds < 3600 else f"{seconds / 3600:.1f} h"
 
 
 def main() -> int:

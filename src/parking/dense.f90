@@ -393,7 +393,7 @@ contains
    !> move sizes tuned afterwards; the cell list compacted when a quarter of its records are
    !> retired. With `target` (scale per particle id), a particle below
    !> its target tries a growth step in half of its trials (`propose`).
-   !> Length: about 90 lines; the batch's parallel trial and in-order commit belong together.
+   !> Length: about 115 lines; the batch's parallel trial, its sharing and the in-order commit belong together.
    subroutine relax_sweep(pk, ms, dp, target, first_sieve, near_short, dist)
       !> Packing.
       type(packing_type), intent(inout) :: pk
