@@ -32,8 +32,12 @@ ALL_CASES = [(1, 1), (1, 2), (2, 1), (2, 2), (3, 1), (3, 2), (4, 1), (4, 2)]
 CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(1, 2), (2, 1), (3, 2), (4, 1)]
 # the small job: the other four combinations by default
 SMALL_CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(1, 1), (2, 2), (3, 1), (4, 2)]
+# M_sand itself: 2 ranks x 1 thread by default
+MSAND_CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(2, 1)]
 # the reduced concrete job (dense strategy): 2 and 3 ranks by default
 CONCRETE_CASES = ALL_CASES if os.environ.get("ANM_MPI_CASES") == "all" else [(2, 1), (3, 1)]
+# and in a walled box too with ANM_MPI_CASES=all (2 minutes more)
+CONCRETE_BOXES = ["periodic", "walls"] if os.environ.get("ANM_MPI_CASES") == "all" else ["periodic"]
 MPIRUN = ["mpirun", "--allow-run-as-root", "--oversubscribe"]
 # the run's own attributes, which differ between runs of one model
 RUN_ATTRIBUTES = ("wall_time", "threads", "program_version")
@@ -63,12 +67,13 @@ def mpi_bin():
     return path
 
 
-@pytest.mark.parametrize("ranks,threads", CASES, ids=[f"{r}x{t}" for r, t in CASES])
-def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
-    text = (ROOT / "inputs" / "default.nml").read_text()
+def recorded_job_on_ranks(job, ranks, threads, mpi_bin, tmp_path):
+    """inputs/JOB.nml (VRML off, output in tmp_path) run on `ranks` x `threads`: every dataset of
+    the model equals the serial model's recorded digests (test_identical_models.py)."""
+    text = (ROOT / "inputs" / f"{job}.nml").read_text()
     text = re.sub(r"directory\s*=\s*'[^']*'", f"directory = '{tmp_path}'", text)
     text = re.sub(r"vrml\s*=\s*\.true\.", "vrml = .false.", text)
-    nml = tmp_path / "default.nml"
+    nml = tmp_path / f"{job}.nml"
     nml.write_text(text)
     env = dict(os.environ, OMP_NUM_THREADS=str(threads))
     res = subprocess.run(MPIRUN + ["-np", str(ranks), mpi_bin, "run", str(nml)], capture_output=True, text=True,
@@ -76,10 +81,22 @@ def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     # one summary (rank 0 alone writes and prints)
     assert res.stdout.count("model: ") == 1, res.stdout
-    digest = model_digest(tmp_path / "default.h5")
-    changed, missing = compare_recorded("default", digest)
-    assert not changed and not missing, (f"{ranks} ranks x {threads} threads: datasets that differ from the serial "
-                                         f"model: {changed + missing}")
+    name = re.search(r"name\s*=\s*'([^']*)'", text).group(1)
+    digest = model_digest(tmp_path / f"{name}.h5")
+    changed, missing = compare_recorded(job, digest)
+    assert not changed and not missing, (f"{job}, {ranks} ranks x {threads} threads: datasets that differ from the "
+                                         f"serial model: {changed + missing}")
+
+
+@pytest.mark.parametrize("ranks,threads", CASES, ids=[f"{r}x{t}" for r, t in CASES])
+def test_mpi_default_job_is_the_serial_model(ranks, threads, mpi_bin, tmp_path):
+    recorded_job_on_ranks("default", ranks, threads, mpi_bin, tmp_path)
+
+
+@pytest.mark.parametrize("ranks,threads", MSAND_CASES, ids=[f"{r}x{t}" for r, t in MSAND_CASES])
+def test_mpi_msand_is_the_serial_model(ranks, threads, mpi_bin, shapes_dir, tmp_path):
+    """M_sand itself (inputs/msand.nml, about 171,000 particles, slabs and their load balance)."""
+    recorded_job_on_ranks("msand", ranks, threads, mpi_bin, tmp_path)
 
 
 def compare(a, b):
@@ -285,7 +302,7 @@ def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp
         assert cmp.returncode == 0, f"{ranks} ranks {extra}:\n" + cmp.stdout + cmp.stderr
 
 
-def concrete_fines_nml(shapes_dir, out, box=6.0, nfine=3, first_fraction=0.45):
+def concrete_fines_nml(shapes_dir, out, box=6.0, nfine=3, first_fraction=0.45, periodic=True):
     """inputs/concrete.nml reduced to a test's size: its `nfine` finest sieves (widths, orders and
     shapes as committed) in a periodic box of `box` mm, the first of them asked for
     `first_fraction` (it stands in for the coarser sieves: 0.61 of the box in all, beyond RSA, so
@@ -310,23 +327,24 @@ def concrete_fines_nml(shapes_dir, out, box=6.0, nfine=3, first_fraction=0.45):
     parking = re.sub(r"dense_rounds\s*=\s*\d+", "dense_rounds = 2", parking)
     assert "strategy = 'dense'" in parking and "dense_time_limit = 0" in parking, parking
     fine = re.search(r"'[^']*/(MA107-6-fine)'", body).group(1)
-    return (f"&box length = {box}, {box}, {box}, periodic = .true. /\n"
+    return (f"&box length = {box}, {box}, {box}, periodic = {'.true.' if periodic else '.false.'} /\n"
             f"&sieves\n   nsieve = {nfine}\n   min_width = {last('min_width')}\n"
             f"   max_width = {last('max_width')}\n   fraction = {fractions}\n"
             f"   source = {nfine}*'{shapes_dir}/{fine}'\n   order = {last('order')}\n/\n"
             f"{parking}\n&output directory = '{out}', name = 'model', vrml = .false. /\n&run seed = 1 /\n")
 
 
-def test_mpi_concrete_namelist_fines_are_the_serial_model(mpi_bin, anm_bin, shapes_dir, tmp_path):
+@pytest.mark.parametrize("box", CONCRETE_BOXES)
+def test_mpi_concrete_namelist_fines_are_the_serial_model(box, mpi_bin, anm_bin, shapes_dir, tmp_path):
     """The concrete namelist's dense strategy (growth, overfill, contact gap, the failures its RSA
     passes may spend) on its three finest sieves in a 6 mm box at 0.61 (`concrete_fines_nml`):
     2 ranks x 1 thread and 3 ranks x 1 thread (all eight combinations with ANM_MPI_CASES=all),
     whose ranks evaluate the sweeps' trials in shares (`--comm-stats`: "dense sweeps"), give the
-    serial model file (2 threads) dataset by dataset."""
+    serial model file (2 threads) dataset by dataset; with ANM_MPI_CASES=all also in a walled box."""
     def write(out):
         out.mkdir()
         nml = out / "job.nml"
-        nml.write_text(concrete_fines_nml(shapes_dir, out))
+        nml.write_text(concrete_fines_nml(shapes_dir, out, periodic=box == "periodic"))
         return nml
     ser = write(tmp_path / "serial")
     res = subprocess.run([anm_bin, "run", str(ser)], capture_output=True, text=True, timeout=600,
