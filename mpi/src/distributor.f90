@@ -246,14 +246,13 @@ contains
       class(mpi_distributor_type), intent(in) :: self
       !> This process' values; on return the smallest over the processes.
       integer(int64), intent(inout) :: k(:)
-      real(wp) :: w0
+      real(wp) :: wait
       if (self%nranks == 1) return
-      w0 = MPI_Wtime()
-      self%bal%busy = self%bal%busy + (w0 - self%bal%mark)
-      call MPI_Allreduce(MPI_IN_PLACE, k, size(k), MPI_INTEGER8, MPI_MIN, self%comm)
+      self%bal%busy = self%bal%busy + (MPI_Wtime() - self%bal%mark)
+      wait = min_over_ranks(self, k)
       self%bal%mark = MPI_Wtime()
       if (associated(self%stats)) then
-         self%stats%gather_wall = self%stats%gather_wall + (MPI_Wtime() - w0)
+         self%stats%gather_wall = self%stats%gather_wall + wait
          self%stats%windows = self%stats%windows + 1
          self%stats%window_bytes = self%stats%window_bytes + 8_int64 * size(k)
          if (self%stats%nbatch > 0) self%stats%bytes(self%stats%nbatch) = self%stats%bytes(self%stats%nbatch) &
@@ -262,31 +261,38 @@ contains
    end subroutine agree_first
 
    !> The outcomes of a batch of trials evaluated in shares (the dense strategy's sweeps;
-   !> collective): member b was evaluated by process mod(b - 1, nranks); one MPI_Allreduce(MIN) of
-   !> 8 bytes per member leaves every member's outcome on every process.
+   !> collective): the same reduction as `agree_first` (MPI_Allreduce MIN, 8 bytes per member),
+   !> counted apart.
    subroutine share_outcomes(self, code, busy)
       !> Distributor.
       class(mpi_distributor_type), intent(in) :: self
-      !> Outcome of each member; this process' members are set, the others are filled in.
+      !> Outcome of each member, huge(code) where this process did not evaluate it; on return the
+      !> smallest over the processes, the evaluating process' value.
       integer(int64), intent(inout) :: code(:)
       !> CPU seconds this process spent evaluating its members.
       real(wp), intent(in) :: busy
-      integer :: b
-      real(wp) :: w0
+      real(wp) :: wait
       if (self%nranks == 1) return
-      do b = 1, size(code)
-         if (mod(b - 1, self%nranks) /= self%rank) code(b) = huge(code)
-      end do
-      w0 = MPI_Wtime()
-      call MPI_Allreduce(MPI_IN_PLACE, code, size(code), MPI_INTEGER8, MPI_MIN, self%comm)
+      wait = min_over_ranks(self, code)
       if (associated(self%stats)) then
-         self%stats%sweep_wall = self%stats%sweep_wall + (MPI_Wtime() - w0)
+         self%stats%sweep_wall = self%stats%sweep_wall + wait
          self%stats%sweep_cpu = self%stats%sweep_cpu + busy
          self%stats%sweep_batches = self%stats%sweep_batches + 1
          self%stats%sweep_trials = self%stats%sweep_trials + size(code)
          self%stats%sweep_bytes = self%stats%sweep_bytes + 8_int64 * size(code)
       end if
    end subroutine share_outcomes
+
+   !> The smallest of each value over the processes, in place (collective); the wall seconds the
+   !> reduction took.
+   function min_over_ranks(self, k) result(seconds)
+      class(mpi_distributor_type), intent(in) :: self
+      integer(int64), intent(inout) :: k(:)
+      real(wp) :: seconds
+      seconds = MPI_Wtime()
+      call MPI_Allreduce(MPI_IN_PLACE, k, size(k), MPI_INTEGER8, MPI_MIN, self%comm)
+      seconds = MPI_Wtime() - seconds
+   end function min_over_ranks
 
    !> Every 32 batches (collective): when the processes' busy times differ by more
    !> than 10 % (largest over mean), the slab bounds move to where the work, taken as uniform

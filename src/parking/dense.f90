@@ -474,8 +474,11 @@ contains
          !$omp end parallel do
          if (stride > 1) then
             call cpu_time(c1)
-            ! outcome code: -1 fits, else the refuser (0: none)
-            code(:n) = merge(-1_i8, int(by(:n), i8), ok(:n))
+            ! outcome code: -1 fits, else the refuser (0: none); huge where another process evaluates
+            do b = 1, n
+               code(b) = huge(code)
+               if (mod(b - first, stride) == 0) code(b) = merge(-1_i8, int(by(b), i8), ok(b))
+            end do
             call dist%share_outcomes(code(:n), real(c1 - c0, wp))
             ok(:n) = code(:n) == -1_i8
             by(:n) = int(max(0_i8, code(:n)))

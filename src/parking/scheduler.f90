@@ -99,8 +99,9 @@ module anm_parking_scheduler
       !> work evens out (this default: never). The slabs never change the model.
       procedure :: balance
       !> The outcomes of a batch of trials that the processes evaluated in shares (collective):
-      !> entry b holds, on return, the value of the process that evaluated member b (this default,
-      !> one process: unchanged).
+      !> each process holds huge() where it did not evaluate a member; on return entry b holds the
+      !> smallest value over the processes, the evaluating one's (this default, one process:
+      !> unchanged).
       procedure :: share_outcomes
    end type phase1_distributor_type
 
@@ -155,8 +156,7 @@ contains
    subroutine share_outcomes(self, code, busy)
       !> Distributor.
       class(phase1_distributor_type), intent(in) :: self
-      !> Outcome of each member; this process' members (`rank` + 1, `rank` + 1 + `nranks`, ...)
-      !> are set, the others are filled in.
+      !> Outcome of each member (huge() where another process evaluated it).
       integer(i8), intent(inout) :: code(:)
       !> CPU seconds this process spent evaluating its members (counted by distributors that count).
       real(wp), intent(in) :: busy
