@@ -164,7 +164,7 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_shar
                   "blocks, divided arrays and kinds | memory per rank: replicated / designed (blocks, halo) |",
                   "|---:|---:|---:|---:|---:|"]
     else:
-        lines += ["| nodes | ranks x threads | replicated | slabs (built) | designed: blocks, divided arrays and kinds | "
+        lines += ["| nodes | ranks x threads | replicated | slabs (built) | designed: blocks, divided kinds | "
                   "memory per rank: replicated / slabs (halo) / designed (blocks, halo) |",
                   "|---:|---:|---:|---:|---:|---:|"]
     blocks = {1: [50.0, 100.0, 100.0], 8: [25.0, 50.0, 50.0], 64: [12.5, 25.0, 25.0]}
@@ -183,7 +183,8 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_shar
             continue
         t_slab = slab_share * work + (1 - slab_share) * work / spread
         h_slab = 2.0 * reach / (100.0 / ranks)
-        mem_slab = arrays_gb + (mem_gb - arrays_gb) / ranks * (1 + h_slab)
+        # the particle arrays are divided like the cell lists (each rank: its slab and halo)
+        mem_slab = mem_gb / ranks * (1 + h_slab)
         lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {t_rep / 60:.1f} min | {t_slab / 60:.1f} min | "
                      f"{t_sp / 60:.2f} min | {mem_gb:.0f} GB / {mem_slab:.1f} GB ({h_slab:.2f}) / {mem_sp:.2f} GB "
                      f"({edges} mm, {h:.2f}) |")

@@ -12,7 +12,7 @@ module test_packing
    use anm_geometry_rotation, only: random_rotation
    use anm_contact_body, only: new_contact_body
    use anm_parking_kinds, only: particle_kind_type
-   use anm_parking_packing, only: packing_type, packing_params_type, fit_scratch_type, new_packing
+   use anm_parking_packing, only: packing_type, packing_params_type, fit_scratch_type, new_packing, near_slab
    use anm_testing, only: unittest_type, new_unittest, check
    implicit none
    private
@@ -39,16 +39,19 @@ contains
               new_unittest("reserve and growth keep the particles and the answers", test_reserve), &
               new_unittest("slabs: a slab's local packing answers as the whole one, periodic", test_slabs_periodic), &
               new_unittest("slabs: a slab's local packing answers as the whole one, walls", test_slabs_walls), &
-              new_unittest("slabs: uneven slabs moved while parking answer as the whole packing", test_slabs_moved)]
+              new_unittest("slabs: uneven slabs moved while parking answer as the whole packing", test_slabs_moved), &
+              new_unittest("divided arrays: three slabs' arrays, exchanged on a grown reach and moved slabs, "// &
+                           "answer as the whole packing and hold every particle once", test_divided)]
    end subroutine collect_packing
 
    !> A packing of unit-sphere kinds (kind 1) with periodic or walled box (slab `slab` of `nslab`).
-   subroutine sphere_packing(pk, periodic, box, error, nslab, slab)
+   subroutine sphere_packing(pk, periodic, box, error, nslab, slab, divided)
       type(packing_type), intent(out) :: pk
       logical, intent(in) :: periodic
       real(wp), intent(in) :: box(3)
       type(error_type), allocatable, intent(out) :: error
       integer, intent(in), optional :: nslab, slab
+      logical, intent(in), optional :: divided
       type(particle_kind_type), allocatable :: kinds(:)
       type(packing_params_type) :: p
       allocate (kinds(1))
@@ -64,6 +67,7 @@ contains
       p%rho_min = 0.1_wp
       if (present(nslab)) p%nslab = nslab
       if (present(slab)) p%slab = slab
+      if (present(divided)) p%divided = divided
       call new_packing(pk, p, kinds)
    end subroutine sphere_packing
 
@@ -297,6 +301,133 @@ contains
          end if
       end do
    end function only_outside
+
+   !> Divided arrays (the MPI build's, three processes emulated here): the same particles are added
+   !> in the same order to a whole packing and to the three slabs' divided packings, each
+   !> localized after every batch (its arrays then hold only its slab and halo). The reach grows
+   !> beyond what the arrays hold once and the slabs move once: both times each slab's owned
+   !> particles within the new reach of another slab go to it (`take_particles`, as the MPI
+   !> exchange sends them). Then each slab's fits answers as brute force over the whole packing
+   !> for candidates centred in it, its arrays hold fewer particles than all, in ascending global
+   !> ids, and the particles the slabs own are every particle once, with its pose.
+   subroutine divided_case(error, periodic)
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in) :: periodic
+      type(packing_type) :: whole, pk(0:2)
+      type(rng_type) :: rng
+      type(fit_scratch_type) :: scratch
+      real(wp) :: x(3), r, lo, hi, box(3), rr(3, 3), sc
+      real(wp), parameter :: uneven(0:3) = [0.0_wp, 2.5_wp, 8.0_wp, 12.0_wp]
+      integer :: q, batch, i, k, ans, nfit, nover
+      integer, allocatable :: seen(:)
+      box = [12.0_wp, 6.0_wp, 6.0_wp]
+      call sphere_packing(whole, periodic, box, error)
+      if (allocated(error)) return
+      do q = 0, 2
+         call sphere_packing(pk(q), periodic, box, error, nslab=3, slab=q, divided=.true.)
+         if (allocated(error)) return
+         call pk(q)%set_reach(0.3_wp)
+      end do
+      call new_rng(rng, 37_i8, 1_i8)
+      do batch = 1, 8
+         if (batch == 4) call exchange(pk, uneven, 0.3_wp)
+         if (batch == 6) then
+            ! a reach beyond what the arrays hold: the other slabs' particles first
+            call check(error, 0.6_wp > pk(0)%held_reach, "the arrays hold less than the new reach needs")
+            if (allocated(error)) return
+            call exchange(pk, uneven, 0.6_wp)
+         end if
+         do i = 1, 30
+            x = [rng%uniform() * box(1), rng%uniform() * box(2), rng%uniform() * box(3)]
+            rr = random_rotation(rng)
+            sc = 0.05_wp + 0.25_wp * rng%uniform()
+            call whole%add(1, x, rr, sc, 1)
+            do q = 0, 2
+               call pk(q)%add(1, x, rr, sc, 1)
+            end do
+         end do
+         do q = 0, 2
+            call pk(q)%localize(pk(q)%np - 29)
+         end do
+      end do
+      allocate (seen(whole%np))
+      seen = 0
+      do q = 0, 2
+         call check(error, pk(q)%np < whole%np .and. pk(q)%ntotal == whole%np, "a slab's arrays hold part of the particles")
+         if (allocated(error)) return
+         call check(error, all(pk(q)%gid(2:pk(q)%np) > pk(q)%gid(:pk(q)%np - 1)), "global ids ascending")
+         if (allocated(error)) return
+         do i = 1, pk(q)%np
+            if (.not. pk(q)%owns(pk(q)%center(:, i))) cycle
+            k = pk(q)%gid(i)
+            seen(k) = seen(k) + 1
+            call check(error, all(pk(q)%center(:, i) == whole%center(:, k)) .and. pk(q)%scale(i) == whole%scale(k) .and. &
+                       all(pk(q)%rot(:, :, i) == whole%rot(:, :, k)), "an owned particle has its pose")
+            if (allocated(error)) return
+         end do
+         nfit = 0
+         nover = 0
+         call pk(q)%slab_bounds(lo, hi)
+         do k = 1, 2000
+            x = [merge(lo, hi, k <= 1000) + merge(1.0_wp, -1.0_wp, k <= 1000) * 0.7_wp * rng%uniform(), &
+                 rng%uniform() * box(2), rng%uniform() * box(3)]
+            if (.not. pk(q)%owns(x)) cycle
+            r = 0.6_wp * rng%uniform()
+            ans = brute_fit(whole, x, r, .not. periodic)
+            if (ans < 0) cycle
+            if (ans == 1) nfit = nfit + 1
+            if (ans == 0) nover = nover + 1
+            call check(error, pk(q)%fits(1, x, random_rotation(rng), r, scratch) .eqv. (ans == 1), &
+                       "a slab's divided arrays answer otherwise than the whole packing")
+            if (allocated(error)) return
+         end do
+         call check(error, nfit > 20 .and. nover > 20, "both answers were tested")
+         if (allocated(error)) return
+      end do
+      call check(error, all(seen == 1), "every particle owned once")
+   contains
+      !> The MPI exchange, emulated: the slabs' owned particles within reach of the other slabs'
+      !> new bounds go to them; then every slab takes its new bounds and reach and what it got.
+      subroutine exchange(pk, nb, reach)
+         type(packing_type), intent(inout) :: pk(0:2)
+         real(wp), intent(in) :: nb(0:3), reach
+         integer :: q, o, j, n
+         integer, allocatable :: g(:), kn(:), sv(:)
+         real(wp), allocatable :: c(:, :), rt(:, :, :), s(:)
+         type(packing_type) :: before(0:2)
+         before = pk
+         do q = 0, 2
+            allocate (g(0), kn(0), sv(0), c(3, 0), rt(3, 3, 0), s(0))
+            do o = 0, 2
+               if (o == q) cycle
+               do j = 1, before(o)%np
+                  if (.not. before(o)%owns(before(o)%center(:, j))) cycle
+                  if (.not. near_slab(before(o)%p, nb(q), nb(q + 1), q, reach, before(o)%center(1, j), &
+                                      before(o)%rho(j))) cycle
+                  g = [g, before(o)%gid(j)]
+                  kn = [kn, before(o)%kind_of(j)]
+                  sv = [sv, before(o)%sieve(j)]
+                  s = [s, before(o)%scale(j)]
+                  n = size(g)
+                  c = reshape([reshape(c, [3 * (n - 1)]), before(o)%center(:, j)], [3, n])
+                  rt = reshape([reshape(rt, [9 * (n - 1)]), reshape(before(o)%rot(:, :, j), [9])], [3, 3, n])
+               end do
+            end do
+            pk(q)%slab_lo = nb(q)
+            pk(q)%slab_hi = nb(q + 1)
+            pk(q)%reach = reach
+            call pk(q)%take_particles(g, c, rt, s, kn, sv)
+            deallocate (g, kn, sv, c, rt, s)
+         end do
+      end subroutine exchange
+   end subroutine divided_case
+
+   subroutine test_divided(error)
+      type(error_type), allocatable, intent(out) :: error
+      call divided_case(error, .true.)
+      if (allocated(error)) return
+      call divided_case(error, .false.)
+   end subroutine test_divided
 
    subroutine test_slabs_periodic(error)
       type(error_type), allocatable, intent(out) :: error

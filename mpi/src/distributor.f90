@@ -26,14 +26,15 @@ module anm_mpi_distributor
    use, intrinsic :: iso_fortran_env, only: int8, int64
    use anm_core_kinds, only: wp
    use anm_parking_attempts, only: attempt_type, attempt_params_type
-   use anm_parking_packing, only: packing_type
+   use anm_parking_packing, only: packing_type, near_slab
    use anm_parking_void_grid, only: void_grid_type
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1, spatial_search
    use anm_parking_kinds, only: kind_exchange_type
    use anm_mpi_kinds, only: mpi_kinds_type, new_mpi_kinds
    use mpi_f08, only: MPI_Comm, MPI_Allgather, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
-                      MPI_IN_PLACE
+                      MPI_IN_PLACE, MPI_Alltoall, MPI_Alltoallv, MPI_LOGICAL, MPI_LOR, MPI_Send, MPI_Recv, &
+                      MPI_Bcast, MPI_STATUS_IGNORE
    implicit none
    private
 
@@ -58,6 +59,12 @@ module anm_mpi_distributor
       !> Spatial mode, per sieve (at its end): particles in this process' cell list and in the
       !> packing (0: not recorded).
       integer :: slab_local(64) = 0, slab_total(64) = 0
+      !> Divided particle arrays, per sieve (at its end): the particles this process holds (0:
+      !> not divided); the exchanges that completed the arrays (slabs moved, reach grown) and the
+      !> bytes this process received in them; the bytes it received when the particles went to
+      !> their blocks of global ids for the output.
+      integer :: held(64) = 0
+      integer(int64) :: exchanges = 0, exchange_bytes = 0, block_bytes = 0
       !> This process: phase 1's CPU time (all its threads) and wall time, and the wall time in
       !> the gathers (s).
       real(wp) :: phase1_cpu = 0.0_wp, phase1_wall = 0.0_wp, gather_wall = 0.0_wp
@@ -104,7 +111,16 @@ module anm_mpi_distributor
       procedure :: kinds_exchange
       procedure :: balance
       procedure :: share_outcomes
+      procedure :: complete_region
+      procedure :: to_blocks
+      procedure :: any_over_ranks
+      procedure :: running_start
+      procedure :: running_end
    end type mpi_distributor_type
+
+   !> Doubles per particle sent between processes: global id, centre, rotation, scale, kind, sieve
+   !> (the integers are exact in a double).
+   integer, parameter :: particle_doubles = 16
 
 contains
 
@@ -342,7 +358,12 @@ contains
             nb(r) = b(r) + 0.7_wp * (nb(r) - b(r))
          end do
          w0 = MPI_Wtime()
-         call pk%set_slab(nb(self%rank), nb(self%rank + 1))
+         if (allocated(pk%gid)) then
+            ! divided arrays: the particles of the slab's new part come from their owners
+            call exchange_region(self, pk, nb, pk%reach)
+         else
+            call pk%set_slab(nb(self%rank), nb(self%rank + 1))
+         end if
          bl%move_cost = MPI_Wtime() - w0
          call MPI_Allreduce(MPI_IN_PLACE, bl%move_cost, 1, MPI_DOUBLE_PRECISION, MPI_MAX, self%comm)
          bl%since_move = 0.0_wp
@@ -350,6 +371,221 @@ contains
          bl%bounds = nb
       end associate
    end subroutine balance
+
+   !> Divided particle arrays (collective): every process' arrays made complete for the reach r
+   !> (larger than their `held_reach`; the slabs stay).
+   subroutine complete_region(self, pk, reach)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+      !> The new reach (mm).
+      real(wp), intent(in) :: reach
+      real(wp) :: b(0:self%nranks), lo, hi
+      if (.not. allocated(pk%gid)) return
+      call pk%slab_bounds(lo, hi)
+      call MPI_Allgather(lo, 1, MPI_DOUBLE_PRECISION, b, 1, MPI_DOUBLE_PRECISION, self%comm)
+      b(self%nranks) = pk%p%box(1)
+      call exchange_region(self, pk, b, reach)
+   end subroutine complete_region
+
+   !> Divided particle arrays (collective): each process sends every particle it owns (centre in
+   !> its slab as the bounds now are) to every other process q whose new slab [nb(q), nb(q + 1))
+   !> it can reach with the reach r (`near_slab`), one MPI_Alltoallv; then each process takes
+   !> its new bounds and reach and adds what it received (`take_particles`). Every particle
+   !> within reach of a new slab is owned by some process, which holds it: the arrays are
+   !> complete for the new slabs and reach.
+   subroutine exchange_region(self, pk, nb, reach)
+      class(mpi_distributor_type), intent(in) :: self
+      type(packing_type), intent(inout) :: pk
+      real(wp), intent(in) :: nb(0:), reach
+      integer :: nsend(0:self%nranks - 1), nrecv(0:self%nranks - 1), sdis(0:self%nranks - 1), rdis(0:self%nranks - 1)
+      real(wp), allocatable :: sbuf(:), rbuf(:), x(:, :), rr(:, :, :), sc(:)
+      integer, allocatable :: g(:), kn(:), sv(:)
+      integer :: i, q, n, k, nr, pass
+      n = self%nranks
+      ! which particles go where (each owned one to every other slab it can reach): counted, then
+      ! packed
+      do pass = 1, 2
+         nsend = 0
+         do i = 1, pk%np
+            if (.not. pk%owns(pk%center(:, i))) cycle
+            do q = 0, n - 1
+               if (q == self%rank) cycle
+               if (.not. near_slab(pk%p, nb(q), nb(q + 1), q, reach, pk%center(1, i), pk%rho(i))) cycle
+               if (pass == 2) call pack_particle(pk, i, sbuf(particle_doubles * (sdis(q) + nsend(q)) + 1:))
+               nsend(q) = nsend(q) + 1
+            end do
+         end do
+         if (pass == 1) then
+            call displacements(nsend, sdis)
+            allocate (sbuf(particle_doubles * sum(nsend)))
+         end if
+      end do
+      call MPI_Alltoall(nsend, 1, MPI_INTEGER, nrecv, 1, MPI_INTEGER, self%comm)
+      call displacements(nrecv, rdis)
+      nr = sum(nrecv)
+      allocate (rbuf(particle_doubles * nr))
+      call MPI_Alltoallv(sbuf, particle_doubles * nsend, particle_doubles * sdis, MPI_DOUBLE_PRECISION, rbuf, &
+                         particle_doubles * nrecv, particle_doubles * rdis, MPI_DOUBLE_PRECISION, self%comm)
+      deallocate (sbuf)
+      if (associated(self%stats)) then
+         self%stats%exchanges = self%stats%exchanges + 1
+         self%stats%exchange_bytes = self%stats%exchange_bytes + 8_int64 * particle_doubles * nr
+      end if
+      pk%slab_lo = nb(self%rank)
+      pk%slab_hi = nb(self%rank + 1)
+      pk%reach = reach
+      allocate (g(nr), kn(nr), sv(nr), x(3, nr), rr(3, 3, nr), sc(nr))
+      do k = 1, nr
+         call unpack_particle(rbuf(particle_doubles * (k - 1) + 1:), g(k), x(:, k), rr(:, :, k), sc(k), kn(k), sv(k))
+      end do
+      deallocate (rbuf)
+      call pk%take_particles(g, x, rr, sc, kn, sv)
+   end subroutine exchange_region
+
+   !> Divided particle arrays, after the parking (collective): every particle goes from the
+   !> process that owns it (centre in its slab) to the process of its block of global ids, block
+   !> r = ids N r / n + 1 .. N (r + 1) / n (N particles, n processes; the parallel writer's
+   !> blocks), one MPI_Alltoallv; the packing then holds its block in order (no cell list).
+   subroutine to_blocks(self, pk)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+      integer :: nsend(0:self%nranks - 1), nrecv(0:self%nranks - 1), sdis(0:self%nranks - 1), rdis(0:self%nranks - 1)
+      integer, allocatable :: to(:)
+      real(wp), allocatable :: sbuf(:), rbuf(:)
+      integer :: i, q, n, k, nr, g, lo, hi
+      integer(int64) :: ntot
+      if (.not. allocated(pk%gid)) return
+      n = self%nranks
+      ntot = pk%ntotal
+      allocate (to(pk%np))
+      nsend = 0
+      do i = 1, pk%np
+         to(i) = -1
+         if (.not. pk%owns(pk%center(:, i))) cycle
+         to(i) = block_of(pk%gid(i))
+         nsend(to(i)) = nsend(to(i)) + 1
+      end do
+      call MPI_Alltoall(nsend, 1, MPI_INTEGER, nrecv, 1, MPI_INTEGER, self%comm)
+      call displacements(nsend, sdis)
+      call displacements(nrecv, rdis)
+      allocate (sbuf(particle_doubles * sum(nsend)))
+      nsend = 0
+      do i = 1, pk%np
+         q = to(i)
+         if (q < 0) cycle
+         call pack_particle(pk, i, sbuf(particle_doubles * (sdis(q) + nsend(q)) + 1:))
+         nsend(q) = nsend(q) + 1
+      end do
+      deallocate (to)
+      call pk%release()
+      deallocate (pk%center, pk%rot, pk%scale, pk%rho, pk%kind_of, pk%sieve, pk%gid, pk%record)
+      allocate (rbuf(particle_doubles * sum(nrecv)))
+      call MPI_Alltoallv(sbuf, particle_doubles * nsend, particle_doubles * sdis, MPI_DOUBLE_PRECISION, rbuf, &
+                         particle_doubles * nrecv, particle_doubles * rdis, MPI_DOUBLE_PRECISION, self%comm)
+      deallocate (sbuf)
+      nr = sum(nrecv)
+      if (associated(self%stats)) self%stats%block_bytes = 8_int64 * particle_doubles * nr
+      lo = int(ntot * self%rank / n)
+      hi = int(ntot * (self%rank + 1) / n)
+      allocate (pk%center(3, hi - lo), pk%rot(3, 3, hi - lo), pk%scale(hi - lo), pk%rho(hi - lo), pk%kind_of(hi - lo), &
+                pk%sieve(hi - lo), pk%gid(hi - lo), pk%record(hi - lo))
+      pk%record = 0
+      do k = 1, nr
+         g = nint(rbuf(particle_doubles * (k - 1) + 1))
+         i = g - lo
+         call unpack_particle(rbuf(particle_doubles * (k - 1) + 1:), pk%gid(i), pk%center(:, i), pk%rot(:, :, i), &
+                              pk%scale(i), pk%kind_of(i), pk%sieve(i))
+         pk%rho(i) = pk%scale(i) * pk%kinds(pk%kind_of(i))%r_out
+      end do
+      pk%np = hi - lo
+   contains
+      !> The process of global id gg's block.
+      integer function block_of(gg) result(r)
+         integer, intent(in) :: gg
+         r = int((int(gg - 1, int64) * n) / ntot)
+         ! the blocks' bounds round down: step to the block that holds gg
+         do while (r > 0 .and. gg <= ntot * r / n)
+            r = r - 1
+         end do
+         do while (r < n - 1 .and. gg > ntot * (r + 1) / n)
+            r = r + 1
+         end do
+      end function block_of
+   end subroutine to_blocks
+
+   !> Whether each entry is true on some process, in place (collective).
+   subroutine any_over_ranks(self, flags)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' flags; on return true where true on some process.
+      logical, intent(inout) :: flags(:)
+      if (self%nranks == 1) return
+      call MPI_Allreduce(MPI_IN_PLACE, flags, size(flags), MPI_LOGICAL, MPI_LOR, self%comm)
+   end subroutine any_over_ranks
+
+   !> Sums in the particles' global order (collective with `running_end`): the sums over the blocks
+   !> before this process' one, received from the process before it.
+   subroutine running_start(self, sums)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> On return the sums over the blocks before this process' one (process 0: unchanged).
+      real(wp), intent(inout) :: sums(:)
+      if (self%rank > 0) call MPI_Recv(sums, size(sums), MPI_DOUBLE_PRECISION, self%rank - 1, 7, self%comm, &
+                                       MPI_STATUS_IGNORE)
+   end subroutine running_start
+
+   !> Sums in the particles' global order (collective with `running_start`): passed on to the next
+   !> process; the last one's are the totals, given to every process.
+   subroutine running_end(self, sums)
+      !> Distributor.
+      class(mpi_distributor_type), intent(in) :: self
+      !> This process' running sums; on return the totals.
+      real(wp), intent(inout) :: sums(:)
+      if (self%rank < self%nranks - 1) call MPI_Send(sums, size(sums), MPI_DOUBLE_PRECISION, self%rank + 1, 7, &
+                                                     self%comm)
+      call MPI_Bcast(sums, size(sums), MPI_DOUBLE_PRECISION, self%nranks - 1, self%comm)
+   end subroutine running_end
+
+   !> Particle i of the packing as `particle_doubles` doubles.
+   subroutine pack_particle(pk, i, buf)
+      type(packing_type), intent(in) :: pk
+      integer, intent(in) :: i
+      real(wp), intent(inout) :: buf(:)
+      buf(1) = real(pk%gid(i), wp)
+      buf(2:4) = pk%center(:, i)
+      buf(5:13) = reshape(pk%rot(:, :, i), [9])
+      buf(14) = pk%scale(i)
+      buf(15) = real(pk%kind_of(i), wp)
+      buf(16) = real(pk%sieve(i), wp)
+   end subroutine pack_particle
+
+   !> A particle from `particle_doubles` doubles (pack_particle).
+   pure subroutine unpack_particle(buf, g, x, rr, sc, kn, sv)
+      real(wp), intent(in) :: buf(:)
+      integer, intent(out) :: g, kn, sv
+      real(wp), intent(out) :: x(3), rr(3, 3), sc
+      g = nint(buf(1))
+      x = buf(2:4)
+      rr = reshape(buf(5:13), [3, 3])
+      sc = buf(14)
+      kn = nint(buf(15))
+      sv = nint(buf(16))
+   end subroutine unpack_particle
+
+   !> Displacements (0-based) of consecutive parts of the given sizes.
+   pure subroutine displacements(counts, displ)
+      integer, intent(in) :: counts(0:)
+      integer, intent(out) :: displ(0:)
+      integer :: r
+      displ(0) = 0
+      do r = 1, size(counts) - 1
+         displ(r) = displ(r - 1) + counts(r - 1)
+      end do
+   end subroutine displacements
 
    !> The kinds built in shares by the processes of the communicator (anm_mpi_kinds).
    subroutine kinds_exchange(self, kx)
@@ -362,19 +598,22 @@ contains
       allocate (kx, source=m)
    end subroutine kinds_exchange
 
-   !> Record, at the end of a sieve, the particles in this process' cell list (its slab and halo)
-   !> and in the packing (counting only).
-   subroutine note_slab(self, sieve, nlocal, np)
+   !> Record, at the end of a sieve, the particles in this process' cell list (its slab and halo),
+   !> in the packing and in this process' arrays (counting only).
+   subroutine note_slab(self, sieve, nlocal, np, held)
       !> Distributor.
       class(mpi_distributor_type), intent(in) :: self
       !> Sieve that ended.
       integer, intent(in) :: sieve
-      !> Particles in this process' cell list, and in the packing.
+      !> Particles in this process' cell list, and in the packing (over all processes).
       integer, intent(in) :: nlocal, np
+      !> Divided arrays: particles in this process' arrays (0: not divided).
+      integer, intent(in) :: held
       if (.not. associated(self%stats)) return
       if (sieve < 1 .or. sieve > size(self%stats%slab_local)) return
       self%stats%slab_local(sieve) = nlocal
       self%stats%slab_total(sieve) = np
+      self%stats%held(sieve) = held
    end subroutine note_slab
 
    !> Count one batch of n members of `bytes` each (nothing is communicated on one process).
@@ -412,7 +651,8 @@ contains
       integer(int64), allocatable :: b(:)
       integer, allocatable :: nm(:)
       real :: cpu
-      integer :: slab_lo(64), slab_hi(64)
+      integer :: slab_lo(64), slab_hi(64), held_lo(64), held_hi(64)
+      integer(int64) :: xbytes, bbytes
       character(len=*), parameter :: fmt_sieve = '("mpi: sieve ",i0,": ",i0," batches, ",i0,' // &
                                      '" members, ",i0," bytes gathered to each rank (per batch min/median/max ",' // &
                                      'i0,"/",i0,"/",i0,")")'
@@ -423,6 +663,10 @@ contains
       if (associated(dist%stats)) then
          call MPI_Allreduce(dist%stats%slab_local, slab_lo, size(slab_lo), MPI_INTEGER, MPI_MIN, dist%comm)
          call MPI_Allreduce(dist%stats%slab_local, slab_hi, size(slab_hi), MPI_INTEGER, MPI_MAX, dist%comm)
+         call MPI_Allreduce(dist%stats%held, held_lo, size(held_lo), MPI_INTEGER, MPI_MIN, dist%comm)
+         call MPI_Allreduce(dist%stats%held, held_hi, size(held_hi), MPI_INTEGER, MPI_MAX, dist%comm)
+         call MPI_Allreduce(dist%stats%exchange_bytes, xbytes, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
+         call MPI_Allreduce(dist%stats%block_bytes, bbytes, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
       end if
       call MPI_Allreduce(mem, lo, 1, MPI_INTEGER8, MPI_MIN, dist%comm)
       call MPI_Allreduce(mem, hi, 1, MPI_INTEGER8, MPI_MAX, dist%comm)
@@ -464,7 +708,14 @@ contains
                    '" particles (slab and halo; ",f0.3," to ",f0.3," of them, 1/ranks = ",f0.3,")")') s, slab_lo(s), &
                slab_hi(s), st%slab_total(s), real(slab_lo(s)) / st%slab_total(s), real(slab_hi(s)) / st%slab_total(s), &
                1.0 / dist%nranks
+            if (held_hi(s) > 0) write (unit, '("mpi: sieve ",i0," end: each rank''s particle arrays hold ",i0,' // &
+                                           '" to ",i0," of them (divided arrays)")') s, held_lo(s), held_hi(s)
          end do
+         if (any(held_hi > 0)) write (unit, '("mpi: divided arrays: ",i0," exchanges of particles (slabs moved, ",' // &
+                                          '"reach grown), at most ",i0," bytes received by a rank in them; at most ",' // &
+                                          'i0," bytes received by a rank when the particles went to their blocks ",' // &
+                                          '"of ids for the output (MPI_Alltoallv, 128 bytes per particle)")') &
+            st%exchanges, xbytes, bbytes
          if (dist%spatial .and. st%slabs) then
             write (unit, '("mpi: load balance: busy time largest/mean ",f0.2," at the first check, ",f0.2,' // &
                    '" at the last; the slabs moved ",i0," times")') dist%bal%first_ratio, dist%bal%last_ratio, &

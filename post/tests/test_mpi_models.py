@@ -218,8 +218,10 @@ def test_mpi_verify_reports_the_serial_audit(periodic, mpi_bin, anm_bin, tmp_pat
 
 # Slabs (the spatial decomposition) on the edges of the attempt sequences: a walled box with void
 # placement, exclusion shells in mm (lazy kinds in width levels, so the reach grows as kinds are
-# built) and particles that exhaust their attempts; a periodic box with two shapes and two
-# orientations per particle (kinds built per sieve). Synthetic shapes: no shapes folder needed.
+# built) and particles that exhaust their attempts (the particle arrays whole on every rank, as
+# void placement needs); the same in a periodic box with random placement (divided arrays); a
+# periodic box with two shapes and two orientations per particle (kinds built per sieve; divided
+# arrays). Synthetic shapes: no shapes folder needed.
 SLAB_NML = """&box length = 8.0, 8.0, 8.0, periodic = {periodic} /
 &sieves
    nsieve = 3
@@ -253,6 +255,8 @@ DENSE_NML = """&box length = 6.0, 6.0, 6.0, periodic = .true. /
 SLAB_JOBS = {
     "walls-void-exclusion-mm": dict(periodic=".false.", parking="max_locations = 300, placement = 'void', max_failures = 5",
                                     shells="nlayer = 1, thickness = 0.05, thickness_unit = 'mm', mode = 'exclude'"),
+    "periodic-exclusion-mm": dict(periodic=".true.", parking="max_locations = 300, max_failures = 5",
+                                  shells="nlayer = 1, thickness = 0.05, thickness_unit = 'mm', mode = 'exclude'"),
     "periodic-shapes-orientations": dict(periodic=".true.",
                                          parking="max_shapes = 2, max_orientations = 2, max_locations = 100",
                                          shells="nlayer = 1, thickness = 0.03, thickness_unit = 'fraction', "
@@ -264,8 +268,10 @@ SLAB_JOBS = {
 def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp_path):
     """The serial model for 2 and 3 ranks in slabs and for 2 ranks with replicated data
     (`--replicated`), dataset by dataset (scripts/compare_models.py), with the kinds built in
-    shares by the ranks and exchanged. The first job's last sieve
+    shares by the ranks and exchanged. The walled job's last sieve
     exhausts attempts (particles not parked), which ends a spatial search with no fit anywhere.
+    With slabs and random placement each rank's particle arrays hold part of the particles
+    (`--comm-stats`), and with 3 ranks the forced moves of the slabs send particles between them.
     The dense strategy (relaxation sweeps and growth, a small periodic job that ends by itself)
     runs with replicated data whatever is asked, and gives the serial model too."""
     def write(out):
@@ -294,6 +300,17 @@ def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp
         if ranks == 3 and job != "dense":
             moves = re.search(r"the slabs moved (\d+) times", res.stderr)
             assert moves and int(moves.group(1)) >= 3, res.stderr
+        # divided particle arrays with slabs unless void placement needs them whole: each rank
+        # then holds part of the particles, and the moved slabs' particles came from their owners
+        held = re.findall(r"sieve \d+ end: each rank's particle arrays hold (\d+) to (\d+) of them", res.stderr)
+        total = re.findall(r"cell list holds \d+ to \d+ of the (\d+) particles", res.stderr)
+        if extra or job == "dense" or "void" in job:
+            assert not held, res.stderr
+        else:
+            assert held and int(held[-1][1]) < int(total[-1]), res.stderr
+            if ranks == 3:
+                exchanges = re.search(r"divided arrays: (\d+) exchanges", res.stderr)
+                assert exchanges and int(exchanges.group(1)) >= 3, res.stderr
         assert ("first-fit reductions" in res.stderr) == (not extra and job != "dense"), res.stderr
         # the kinds were built in shares: rank 0 received some from the others
         shares = rf"kinds: built in shares by {ranks} processes: \d+ parts \(bodies, shells\) built by this one, "

@@ -99,6 +99,9 @@ module anm_io_hdf5
    !> Write a dataset (float64 or int32 arrays of rank 1-3, or a string). In a file written in
    !> parallel (h5_create with `par`), `split = .true.` makes each process write its block of the
    !> last dimension (every process passes the whole array); without it process 0 writes it all.
+   !> With `split`, `offset` >= 0 and `total` (parallel files only), each process passes only the
+   !> entries it writes, offset+1..offset+size of the last dimension of a dataset of `total`
+   !> there (`offset` < 0: as without it).
    interface h5_write
       module procedure :: write_real1, write_real2, write_real3, write_int1, write_string, write_strings
    end interface h5_write
@@ -319,100 +322,125 @@ contains
       if (st /= 0) call fail(error, file, path, "write failed")
    end subroutine finish
 
-   subroutine write_real1(file, path, x, error, split)
+   subroutine write_real1(file, path, x, error, split, offset, total)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:)
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
-      integer(hid_t) :: dset, space
+      integer(i8), intent(in), optional :: offset, total
+      integer(hid_t) :: dset, space, mspace
+      integer(hsize_t) :: dims(rank(x))
       integer :: st
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      dims = shape(x, hsize_t)
+      if (present(total)) dims(rank(x)) = total
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, shape(x, hsize_t), split, st)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
+         if (mspace /= space) call h5sclose_f(mspace, st)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real1
 
-   subroutine write_real2(file, path, x, error, split)
+   subroutine write_real2(file, path, x, error, split, offset, total)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:, :)
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
-      integer(hid_t) :: dset, space
+      integer(i8), intent(in), optional :: offset, total
+      integer(hid_t) :: dset, space, mspace
+      integer(hsize_t) :: dims(rank(x))
       integer :: st
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      dims = shape(x, hsize_t)
+      if (present(total)) dims(rank(x)) = total
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, shape(x, hsize_t), split, st)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
+         if (mspace /= space) call h5sclose_f(mspace, st)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real2
 
-   subroutine write_real3(file, path, x, error, split)
+   subroutine write_real3(file, path, x, error, split, offset, total)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       real(wp), intent(in) :: x(:, :, :)
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
-      integer(hid_t) :: dset, space
+      integer(i8), intent(in), optional :: offset, total
+      integer(hid_t) :: dset, space, mspace
+      integer(hsize_t) :: dims(rank(x))
       integer :: st
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), dset, space, error)
+      dims = shape(x, hsize_t)
+      if (present(total)) dims(rank(x)) = total
+      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, shape(x, hsize_t), split, st)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=space, &
+         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
+         if (mspace /= space) call h5sclose_f(mspace, st)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_real3
 
-   subroutine write_int1(file, path, x, error, split)
+   subroutine write_int1(file, path, x, error, split, offset, total)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
       integer, intent(in) :: x(:)
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
-      integer(hid_t) :: dset, space
+      integer(i8), intent(in), optional :: offset, total
+      integer(hid_t) :: dset, space, mspace
+      integer(hsize_t) :: dims(rank(x))
       integer :: st
-      call make_dataset(file, path, H5T_NATIVE_INTEGER, shape(x, hsize_t), dset, space, error)
+      dims = shape(x, hsize_t)
+      if (present(total)) dims(rank(x)) = total
+      call make_dataset(file, path, H5T_NATIVE_INTEGER, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, shape(x, hsize_t), split, st)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st, mem_space_id=space, &
+         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
+         if (mspace /= space) call h5sclose_f(mspace, st)
       else
          call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
       end if
       call finish(file, path, st, dset, space, error)
    end subroutine write_int1
 
-   !> This process' part of a dataset of shape `dims` written in parallel, selected in `space` (used
-   !> as both the memory and the file dataspace: every process holds the whole array): with
-   !> `split`, the contiguous block lo+1..hi of the last dimension, lo = n rank / nranks; otherwise
-   !> everything on process 0 and nothing on the others.
-   subroutine select_part(file, space, dims, split, st)
+   !> This process' part of a dataset of shape `dims` written in parallel, selected in the file
+   !> dataspace `space`: with `split`, a contiguous block of the last dimension, either
+   !> lo+1..hi, lo = n rank / nranks (every process holds the whole array, used as the memory
+   !> dataspace: mspace = space), or, with `offset` >= 0, the `held` entries offset+1..offset+held
+   !> that this process holds (mspace: a new dataspace of the array's shape, the caller closes it
+   !> when it differs from space); otherwise everything on process 0 and nothing on the others.
+   subroutine select_part(file, space, dims, split, st, offset, held, mspace)
       use hdf5, only: h5sselect_none_f, h5sselect_hyperslab_f, H5S_SELECT_SET_F
       type(h5_file_type), intent(in) :: file
       integer(hid_t), intent(in) :: space
       integer(hsize_t), intent(in) :: dims(:)
       logical, intent(in), optional :: split
       integer, intent(out) :: st
-      integer(hsize_t) :: offset(size(dims)), count(size(dims)), n, lo, hi
-      logical :: by_block
+      integer(i8), intent(in), optional :: offset, held
+      integer(hid_t), intent(out), optional :: mspace
+      integer(hsize_t) :: start(size(dims)), count(size(dims)), n, lo, hi, mdims(size(dims))
+      logical :: by_block, held_only
       st = 0
+      if (present(mspace)) mspace = space
       by_block = .false.
       if (present(split)) by_block = split .and. size(dims) > 0
       if (.not. by_block) then
@@ -420,17 +448,29 @@ contains
          return
       end if
       n = dims(size(dims))
-      lo = n * file%rank / file%nranks
-      hi = n * (file%rank + 1) / file%nranks
+      held_only = .false.
+      if (present(offset) .and. present(held) .and. present(mspace)) held_only = offset >= 0
+      if (held_only) then
+         lo = offset
+         hi = offset + held
+         mdims = dims
+         mdims(size(dims)) = max(1_i8, held)
+         call h5screate_simple_f(size(dims), mdims, mspace, st)
+         if (st /= 0) return
+         if (held == 0) call h5sselect_none_f(mspace, st)
+      else
+         lo = n * file%rank / file%nranks
+         hi = n * (file%rank + 1) / file%nranks
+      end if
       if (hi <= lo) then
          call h5sselect_none_f(space, st)
          return
       end if
-      offset = 0
+      start = 0
       count = dims
-      offset(size(dims)) = lo
+      start(size(dims)) = lo
       count(size(dims)) = hi - lo
-      call h5sselect_hyperslab_f(space, H5S_SELECT_SET_F, offset, count, st)
+      call h5sselect_hyperslab_f(space, H5S_SELECT_SET_F, start, count, st)
    end subroutine select_part
 
    subroutine string_type(len, dtype)

@@ -43,6 +43,9 @@ module anm_io_model
       character(len=256), allocatable :: shape_names(:)
       !> Number of particles.
       integer :: np = 0
+      !> The particles the per-particle arrays hold: all np (first = -1), or, in the MPI build with
+      !> divided arrays, this process' block first+1 .. first+size(scale) of them.
+      integer :: first = -1
       !> Per particle: shape index (1-based in memory, 0-based in the file), order, sieve (1-based).
       integer, allocatable :: shape(:), nmax(:), sieve(:)
       !> Per particle: centre (3, np) in mm, inside the box.
@@ -108,7 +111,8 @@ contains
    !> Errors name `shown` (default: path) and the dataset. With `par` (the MPI build), every process
    !> calls it with the same model and name and the file is written collectively through parallel
    !> HDF5: each process writes a block of the /particles datasets, process 0 the rest; the layout
-   !> and the content are those of the serial file.
+   !> and the content are those of the serial file. With divided arrays (`model%first` >= 0) each
+   !> process' model holds only its block (the same blocks).
    subroutine write_model_file(path, model, error, shown, par)
       !> Model file name.
       character(len=*), intent(in) :: path
@@ -125,7 +129,8 @@ contains
       real(wp), allocatable :: coeffs(:, :, :), rot(:, :, :)
       complex(wp), allocatable :: c(:, :)
       integer, allocatable :: nmax(:)
-      integer :: ns, ncoef, s, n, m, k, p, nmx
+      integer :: ns, ncoef, s, n, m, k, p, nmx, nh
+      integer(i8) :: first, total
 
       call h5_create(f, path, error, par)
       if (allocated(error)) goto 98
@@ -161,31 +166,37 @@ contains
       call h5_write(f, "/shapes/name", model%shape_names, error)
       if (allocated(error)) goto 99
 
+      ! the particles held: all, or (divided arrays, written in parallel) this process' block
+      nh = model%np
+      if (model%first >= 0) nh = size(model%scale)
+      first = model%first
+      total = model%np
       call h5_group(f, "/particles", error)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/shape", model%shape(:model%np) - 1, error, split=.true.)
+      call h5_write(f, "/particles/shape", model%shape(:nh) - 1, error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/center", model%center(:, :model%np), error, split=.true.)
+      call h5_write(f, "/particles/center", model%center(:, :nh), error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
       ! numpy reads (np, 3, 3) with R[p, i, j] = file(j, i, p) in Fortran order: store the transpose
-      allocate (rot(3, 3, model%np))
-      do p = 1, model%np
+      allocate (rot(3, 3, nh))
+      do p = 1, nh
          rot(:, :, p) = transpose(model%rotation(:, :, p))
       end do
-      call h5_write(f, "/particles/rotation", rot, error, split=.true.)
+      call h5_write(f, "/particles/rotation", rot, error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
       ! the in-memory file and its copy on closing come on top of the model: free the copy now
       ! (72 bytes per particle; 0.7 GB at 10^7 particles)
       deallocate (rot)
-      call h5_write(f, "/particles/scale", model%scale(:model%np), error, split=.true.)
+      call h5_write(f, "/particles/scale", model%scale(:nh), error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/nmax", model%nmax(:model%np), error, split=.true.)
+      call h5_write(f, "/particles/nmax", model%nmax(:nh), error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
-      call h5_write(f, "/particles/sieve", model%sieve(:model%np) - 1, error, split=.true.)
+      call h5_write(f, "/particles/sieve", model%sieve(:nh) - 1, error, split=.true., offset=first, total=total)
       if (allocated(error)) goto 99
       if (allocated(model%shell_thickness)) then
          if (size(model%shell_thickness, 1) > 0) then
-            call h5_write(f, "/particles/shell_thickness", model%shell_thickness(:, :model%np), error, split=.true.)
+            call h5_write(f, "/particles/shell_thickness", model%shell_thickness(:, :nh), error, split=.true., &
+                          offset=first, total=total)
             if (allocated(error)) goto 99
          end if
       end if

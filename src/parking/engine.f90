@@ -83,6 +83,10 @@ contains
          if (rp%dist%spatial) then
             pp%nslab = rp%dist%nslab
             pp%slab = rp%dist%slab
+            ! each process holds only its slab's particles and halo, unless void placement (its
+            ! grid is fed every particle on every process) or the VRML file (written by one
+            ! process from every particle) needs them all (docs/mpi.md)
+            pp%divided = pp%nslab > 1 .and. .not. rp%void .and. .not. cfg%output%vrml
          end if
          ! the processes build the kinds in shares and exchange them; the on-disk cache is then
          ! not used (its hits could differ between the processes, which must build the same lists
@@ -112,13 +116,16 @@ contains
          call park_rsa(pk, ks, ap, rp, cfg%sieves%target_fraction(:cfg%sieves%nsieve), result, run, error)
       end select
       if (allocated(error)) return
+      ! divided arrays: the particles to their blocks of global ids (the output's), process r
+      ! holding ids N r / n + 1 .. N (r + 1) / n
+      if (pk%p%divided) call rp%dist%to_blocks(pk)
       ! the shell layers of the kinds that hold particles (the VRML output draws every kind), and
       ! the shell fractions they give
       if (cfg%shells%nlayer > 0) then
          if (cfg%output%vrml) then
             call ks%build_layers(pk%kinds, [(s, s=1, size(pk%kinds))], error)
          else
-            call ks%build_layers(pk%kinds, kinds_in_use(pk), error)
+            call ks%build_layers(pk%kinds, kinds_in_use(pk, rp), error)
          end if
          if (allocated(error)) return
          call add_shell_fractions(pk, rp, result)
@@ -131,13 +138,16 @@ contains
       model%attempts = run%attempts
       model%wall_time = real(t1 - run%t0, wp) / run%rate
       call fill_model(cfg, pk, result, model)
+      if (pk%p%divided) model%first = int(int(pk%ntotal, i8) * rp%dist%rank / rp%dist%nranks)
       call take_int1(pk%kind_of, pk%np, kind_of)
       call move_alloc(pk%kinds, kinds)
    end subroutine run_parking
 
-   !> The kinds of the parked particles, each once, in increasing order.
-   pure function kinds_in_use(pk) result(list)
+   !> The kinds of the parked particles, each once, in increasing order (divided arrays: of the
+   !> particles of every process; collective).
+   function kinds_in_use(pk, rp) result(list)
       type(packing_type), intent(in) :: pk
+      type(rsa_params_type), intent(in) :: rp
       integer, allocatable :: list(:)
       logical, allocatable :: used(:)
       integer :: i, k
@@ -146,19 +156,27 @@ contains
       do i = 1, pk%np
          used(pk%kind_of(i)) = .true.
       end do
+      if (pk%p%divided) call rp%dist%any_over_ranks(used)
       list = pack([(k, k=1, size(pk%kinds))], used)
    end function kinds_in_use
 
    !> The shell volume fraction of each sieve (the sum of its particles' shell volumes over the
    !> box volume, not corrected for overlaps), from the built layers, particle by particle in
-   !> the order they were parked.
-   pure subroutine add_shell_fractions(pk, rp, result)
+   !> the order they were parked (divided arrays: each process holds a block of them in that
+   !> order and continues the sums of the blocks before it; collective).
+   subroutine add_shell_fractions(pk, rp, result)
       type(packing_type), intent(in) :: pk
       type(rsa_params_type), intent(in) :: rp
       type(sieve_result_type), intent(inout) :: result(:)
       integer :: i, k, s
       real(wp) :: sc
+      real(wp) :: sums(size(result))
       result%shell_fraction = 0.0_wp
+      if (pk%p%divided) then
+         sums = 0.0_wp
+         call rp%dist%running_start(sums)
+         result%shell_fraction = sums
+      end if
       do i = 1, pk%np
          k = pk%kind_of(i)
          s = pk%sieve(i)
@@ -166,6 +184,11 @@ contains
          result(s)%shell_fraction = result(s)%shell_fraction &
                                     + sc**3 * (pk%kinds(k)%layer_volume(rp%nlayer) - pk%kinds(k)%volume) / rp%vbox
       end do
+      if (pk%p%divided) then
+         sums = result%shell_fraction
+         call rp%dist%running_end(sums)
+         result%shell_fraction = sums
+      end if
    end subroutine add_shell_fractions
 
    !> Load the shapes of every sieve (each distinct source once) into the model: sieve s uses
@@ -356,7 +379,9 @@ contains
 
    !> The model of a packing. The packing's particle arrays move into the model (one at a time,
    !> trimmed to np) and its cell list is freed: at 10^7 particles no two copies of the particles
-   !> exist at once. The packing keeps its kinds and np only.
+   !> exist at once. The packing keeps its kinds and np only. Divided arrays: the packing holds
+   !> this process' block of the particles (`to_blocks`), which the model takes (the caller sets
+   !> `model%first`); the model's np counts every process' particles.
    subroutine fill_model(cfg, pk, result, model)
       type(run_config_type), intent(in) :: cfg
       type(packing_type), intent(inout) :: pk
@@ -366,6 +391,7 @@ contains
       real(wp) :: vbox
       np = pk%np
       vbox = product(cfg%box%length)
+      model%np = pk%ntotal
       allocate (model%achieved_fraction(size(result)), model%count(size(result)), model%shell_fraction(size(result)))
       do s = 1, size(result)
          model%achieved_fraction(s) = result(s)%vol / vbox
@@ -374,7 +400,6 @@ contains
       end do
       model%box = cfg%box%length
       model%periodic = cfg%box%periodic
-      model%np = np
       call pk%release()
       if (allocated(pk%rho)) deallocate (pk%rho)
       if (allocated(pk%record)) deallocate (pk%record)

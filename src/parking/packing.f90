@@ -19,6 +19,14 @@
 !> then decides the batch's re-checks alike). `fits` answers for candidates centred in the slab
 !> exactly as the whole packing would; for others it may miss overlaps.
 !>
+!> Divided arrays (`divided`, with slabs): the particle arrays too hold only the particles in
+!> reach of the slab (its own, whose centres it owns, and its halo), sorted by their global ids
+!> `gid` (the order the processes parked them in; `ntotal` of them so far). `localize` and
+!> `compact` drop the others from the arrays as well; `held_reach` is the reach for which the
+!> arrays are complete (every particle within it of the slab is held): a reach beyond it, or
+!> slabs moved, need the particles that other processes own (`take_particles`, after the MPI
+!> build's exchange). Without `divided` particle i is the i-th parked (gid = i).
+!>
 !> Usage:
 !>     call new_packing(pk, params, kinds)          ! kinds moved in (pk%kinds)
 !>     if (pk%fits(k, x, r, sc, scratch)) call pk%add(k, x, r, sc, sieve)
@@ -34,7 +42,7 @@ module anm_parking_packing
    implicit none
    private
 
-   public :: packing_type, packing_params_type, fit_scratch_type, new_packing
+   public :: packing_type, packing_params_type, fit_scratch_type, new_packing, near_slab
 
    !> What a packing needs of the run (filled by the driver).
    type :: packing_params_type
@@ -51,6 +59,8 @@ module anm_parking_packing
       type(contact_params_type) :: contact
       !> Slabs along x (1: the whole box) and this process' slab (0-based).
       integer :: nslab = 1, slab = 0
+      !> With slabs: the particle arrays hold only the slab's particles and halo (see the notes).
+      logical :: divided = .false.
    end type packing_params_type
 
    !> Scratch of one thread for `fits` and `neighbours` (candidate ids and image shifts).
@@ -68,8 +78,12 @@ module anm_parking_packing
       type(packing_params_type) :: p
       !> Kinds (built by the caller before a particle of the kind is added).
       type(particle_kind_type), allocatable :: kinds(:)
-      !> Number of particles.
-      integer :: np = 0
+      !> Number of particles (held by this process), and parked by all processes.
+      integer :: np = 0, ntotal = 0
+      !> Divided arrays: the global id of each particle held (ascending; unallocated otherwise).
+      integer, allocatable :: gid(:)
+      !> Divided arrays: the reach for which the particles held are complete (mm).
+      real(wp) :: held_reach = huge(1.0_wp)
       !> Centre (3, :), rotation body to world (3, 3, :), scale, bounding radius (mm).
       real(wp), allocatable :: center(:, :), rot(:, :, :), scale(:), rho(:)
       !> Kind and sieve of each particle.
@@ -117,6 +131,10 @@ module anm_parking_packing
       procedure :: set_slab
       !> This process' slab [lo, hi) along x.
       procedure :: slab_bounds
+      !> Global id of particle i.
+      procedure :: global_id
+      !> Add particles parked by other processes to the arrays (divided arrays).
+      procedure :: take_particles
    end type packing_type
 
    !> Initial capacity (particles).
@@ -144,6 +162,7 @@ contains
       call new_cell_list(pk%cl, params%box, params%periodic, params%rho_min, capacity=n)
       allocate (pk%center(3, n), pk%rot(3, 3, n), pk%scale(n), pk%rho(n), pk%sieve(n), pk%kind_of(n))
       allocate (pk%record(n), pk%owner(n))
+      if (params%divided .and. params%nslab > 1) allocate (pk%gid(n))
       pk%slab_lo = params%box(1) * params%slab / max(1, params%nslab)
       pk%slab_hi = params%box(1) * (params%slab + 1) / max(1, params%nslab)
    end subroutine new_packing
@@ -161,7 +180,9 @@ contains
       integer :: np
       if (self%np == size(self%scale)) call grow(self)
       self%np = self%np + 1
+      self%ntotal = self%ntotal + 1
       np = self%np
+      if (allocated(self%gid)) self%gid(np) = self%ntotal
       self%center(:, np) = x
       self%rot(:, :, np) = rr
       self%scale(np) = sc
@@ -212,10 +233,12 @@ contains
          self%rho(i) = self%rho(last)
          self%sieve(i) = self%sieve(last)
          self%kind_of(i) = self%kind_of(last)
+         if (allocated(self%gid)) self%gid(i) = self%gid(last)
          self%record(i) = self%record(last)
          if (self%record(i) > 0) self%owner(self%record(i)) = i
       end if
       self%np = last - 1
+      self%ntotal = self%ntotal - 1
    end subroutine remove
 
    !> Move particle i to centre x (inside the box) and rotation rr (and scale sc when given).
@@ -242,11 +265,13 @@ contains
    end subroutine move
 
    !> Rebuild the cell list from the live particles (record i for particle i with one slab; with
-   !> slabs, from the particles in reach; marks are reset).
+   !> slabs, from the particles in reach; with divided arrays the others leave the arrays too;
+   !> marks are reset).
    subroutine compact(self)
       !> Packing.
       class(packing_type), intent(inout) :: self
       integer :: i
+      if (allocated(self%gid)) call drop_out_of_reach(self, 1)
       call new_cell_list(self%cl, self%p%box, self%p%periodic, self%p%rho_min, capacity=max(initial_capacity, self%np))
       self%nrecord = 0
       self%ndead = 0
@@ -261,6 +286,38 @@ contains
       if (self%nrecord >= first_reorder) call self%cl%reorder()
       self%next_reorder = max(first_reorder, merge(2 * self%nrecord, huge(1), self%nrecord < huge(1) / 2))
    end subroutine compact
+
+   !> Divided arrays: particles first..np out of reach of the slab leave the arrays (the others
+   !> keep their order, and their records follow them); the arrays are then complete for the
+   !> current reach at most.
+   subroutine drop_out_of_reach(self, first)
+      type(packing_type), intent(inout) :: self
+      integer, intent(in) :: first
+      integer :: i, n
+      n = max(1, first) - 1
+      do i = max(1, first), self%np
+         if (.not. self%in_region(i)) then
+            if (self%record(i) > 0) then
+               call self%cl%remove(self%record(i), self%center(:, i), self%rho(i))
+               self%owner(self%record(i)) = 0
+            end if
+            cycle
+         end if
+         n = n + 1
+         if (n == i) cycle
+         self%center(:, n) = self%center(:, i)
+         self%rot(:, :, n) = self%rot(:, :, i)
+         self%scale(n) = self%scale(i)
+         self%rho(n) = self%rho(i)
+         self%sieve(n) = self%sieve(i)
+         self%kind_of(n) = self%kind_of(i)
+         self%gid(n) = self%gid(i)
+         self%record(n) = self%record(i)
+         if (self%record(n) > 0) self%owner(self%record(n)) = n
+      end do
+      self%np = n
+      self%held_reach = min(self%held_reach, self%reach)
+   end subroutine drop_out_of_reach
 
    !> Make room for n particles and as many cell-list records and blocks (nothing changes when
    !> there is room already; else room for 1/32 more, so that a slowly rising estimate does not copy the
@@ -354,36 +411,23 @@ contains
              (x(1) < self%slab_hi .or. self%p%slab == self%p%nslab - 1)
    end function owns
 
-   !> Whether particle i can meet a candidate centred in this process' slab: its centre lies within
-   !> reach + its bounding radius of the slab along x (periodic: either way round; a relative
-   !> margin of 1e-9 covers rounding). Always true with one slab.
+   !> Whether particle i can meet a candidate centred in this process' slab (`near_slab`). Always
+   !> true with one slab.
    pure logical function in_region(self, i)
       !> Packing.
       class(packing_type), intent(in) :: self
       !> Particle.
       integer, intent(in) :: i
-      real(wp) :: lo, hi, x, d, lx
       in_region = .true.
       if (self%p%nslab <= 1) return
-      lx = self%p%box(1)
-      lo = self%slab_lo
-      hi = self%slab_hi
-      ! the end slabs own the centres beyond the box's faces too
-      if (self%p%slab == 0) lo = min(lo, 0.0_wp)
-      if (self%p%slab == self%p%nslab - 1) hi = max(hi, lx)
-      x = self%center(1, i)
-      if (x >= lo .and. x <= hi) return
-      if (self%p%periodic) then
-         d = min(modulo(lo - x, lx), modulo(x - hi, lx))
-      else
-         d = max(lo - x, x - hi)
-      end if
-      in_region = d <= (self%reach + self%rho(i)) * (1.0_wp + 1.0e-9_wp) + 1.0e-9_wp * lx
+      in_region = near_slab(self%p, self%slab_lo, self%slab_hi, self%p%slab, self%reach, self%center(1, i), self%rho(i))
    end function in_region
 
    !> Move this process' slab to [lo, hi) along x (mm) and rebuild the cell list from the
    !> particles then in reach. Every process must move its slab in the same call, so that the
-   !> slabs keep tiling the box edge (the MPI build's load balance).
+   !> slabs keep tiling the box edge (the MPI build's load balance). With divided arrays the
+   !> arrays then miss the particles of the slab's new part: the MPI build moves the bounds
+   !> itself and sends them (`take_particles`).
    subroutine set_slab(self, lo, hi)
       !> Packing.
       class(packing_type), intent(inout) :: self
@@ -395,7 +439,7 @@ contains
    end subroutine set_slab
 
    !> Take particles first..np that are out of reach of this process' slab out of the cell list
-   !> (nothing with one slab).
+   !> (and out of the arrays with divided arrays; nothing with one slab).
    subroutine localize(self, first)
       !> Packing.
       class(packing_type), intent(inout) :: self
@@ -403,6 +447,10 @@ contains
       integer, intent(in) :: first
       integer :: i
       if (self%p%nslab <= 1) return
+      if (allocated(self%gid)) then
+         call drop_out_of_reach(self, first)
+         return
+      end if
       do i = max(1, first), self%np
          if (self%record(i) == 0) cycle
          if (self%in_region(i)) cycle
@@ -414,7 +462,9 @@ contains
 
    !> Set the reach: the largest bounding radius (mm) of the candidates to come. When it grows
    !> (a sieve of larger particles, or a kind built later with a larger radius), the cell list is
-   !> rebuilt from the particles now in reach; a smaller reach keeps the records it has.
+   !> rebuilt from the particles now in reach; a smaller reach keeps the records it has. With
+   !> divided arrays a reach beyond `held_reach` needs the other processes' particles first (the
+   !> MPI build's `complete_region`).
    subroutine set_reach(self, r)
       !> Packing.
       class(packing_type), intent(inout) :: self
@@ -625,6 +675,192 @@ contains
       end do
    end subroutine likely_first
 
+   !> Whether a particle (centre x along x, bounding radius rho) can meet a candidate centred in
+   !> slab `slab` [lo, hi) of the box (p%nslab slabs) whose bounding radius is at most `reach`:
+   !> its centre lies within reach + rho of the slab along x (periodic: either way round; a
+   !> relative margin of 1e-9 covers rounding).
+   pure logical function near_slab(p, lo, hi, slab, reach, x, rho) result(near)
+      !> Packing parameters (box, periodicity, slabs).
+      type(packing_params_type), intent(in) :: p
+      !> The slab's bounds (mm) and index (0-based; the end slabs own the centres beyond the
+      !> box's faces too).
+      real(wp), intent(in) :: lo, hi
+      integer, intent(in) :: slab
+      !> Reach (mm), the particle's centre along x and bounding radius (mm).
+      real(wp), intent(in) :: reach, x, rho
+      real(wp) :: a, b, d, lx
+      near = .true.
+      lx = p%box(1)
+      a = lo
+      b = hi
+      if (slab == 0) a = min(a, 0.0_wp)
+      if (slab == p%nslab - 1) b = max(b, lx)
+      if (x >= a .and. x <= b) return
+      if (p%periodic) then
+         d = min(modulo(a - x, lx), modulo(x - b, lx))
+      else
+         d = max(a - x, x - b)
+      end if
+      near = d <= (reach + rho) * (1.0_wp + 1.0e-9_wp) + 1.0e-9_wp * lx
+   end function near_slab
+
+   !> Global id of particle i (its place in the order of parking over all processes).
+   pure integer function global_id(self, i) result(g)
+      !> Packing.
+      class(packing_type), intent(in) :: self
+      !> Particle (1..np).
+      integer, intent(in) :: i
+      g = i
+      if (allocated(self%gid)) g = self%gid(i)
+   end function global_id
+
+   !> Divided arrays: add particles parked earlier and held by other processes (global ids
+   !> g(k), centres x(:, k), rotations rr(:, :, k), scales sc(k), kinds kn(k), sieves sv(k));
+   !> those already held are skipped. The arrays stay sorted by global id and the cell list is
+   !> rebuilt for the slab and reach as they now are (`compact`, which drops what is out of
+   !> reach); the arrays are then complete for that reach (the caller received every particle
+   !> within it of the slab).
+   subroutine take_particles(self, g, x, rr, sc, kn, sv)
+      !> Packing.
+      class(packing_type), intent(inout) :: self
+      !> Global ids (any order), centres, rotations, scales, kinds and sieves.
+      integer, intent(in) :: g(:), kn(:), sv(:)
+      real(wp), intent(in) :: x(:, :), rr(:, :, :), sc(:)
+      integer, allocatable :: order(:), src(:)
+      real(wp), allocatable :: c2(:, :), r2(:, :, :), s2(:)
+      integer, allocatable :: k2(:), v2(:), g2(:)
+      integer :: m, i, j, n, k, cap
+      m = size(g)
+      order = sort_index(g)
+      ! merge the held arrays (ascending) with the received ones (ascending by `order`), each
+      ! global id once; src > 0: held particle, < 0: received one
+      allocate (src(self%np + m))
+      i = 1
+      j = 1
+      n = 0
+      do while (i <= self%np .or. j <= m)
+         if (j > m) then
+            k = i
+            i = i + 1
+         else if (i > self%np) then
+            k = -order(j)
+            j = j + 1
+         else if (self%gid(i) <= g(order(j))) then
+            if (self%gid(i) == g(order(j))) j = j + 1
+            k = i
+            i = i + 1
+         else
+            k = -order(j)
+            j = j + 1
+         end if
+         if (k < 0 .and. n > 0) then
+            ! a particle received twice (the MPI exchange sends each once: only its owner sends it)
+            if (gid_of(src(n)) == g(-k)) cycle
+         end if
+         n = n + 1
+         src(n) = k
+      end do
+      ! one array at a time (the copy costs the largest array, not all of them)
+      cap = max(size(self%scale), n + n / 32)
+      allocate (c2(3, cap))
+      do i = 1, n
+         if (src(i) > 0) c2(:, i) = self%center(:, src(i))
+         if (src(i) < 0) c2(:, i) = x(:, -src(i))
+      end do
+      call move_alloc(c2, self%center)
+      allocate (r2(3, 3, cap))
+      do i = 1, n
+         if (src(i) > 0) r2(:, :, i) = self%rot(:, :, src(i))
+         if (src(i) < 0) r2(:, :, i) = rr(:, :, -src(i))
+      end do
+      call move_alloc(r2, self%rot)
+      allocate (s2(cap))
+      do i = 1, n
+         if (src(i) > 0) s2(i) = self%scale(src(i))
+         if (src(i) < 0) s2(i) = sc(-src(i))
+      end do
+      call move_alloc(s2, self%scale)
+      allocate (k2(cap))
+      do i = 1, n
+         if (src(i) > 0) k2(i) = self%kind_of(src(i))
+         if (src(i) < 0) k2(i) = kn(-src(i))
+      end do
+      call move_alloc(k2, self%kind_of)
+      allocate (v2(cap))
+      do i = 1, n
+         if (src(i) > 0) v2(i) = self%sieve(src(i))
+         if (src(i) < 0) v2(i) = sv(-src(i))
+      end do
+      call move_alloc(v2, self%sieve)
+      allocate (g2(cap))
+      do i = 1, n
+         g2(i) = gid_of(src(i))
+      end do
+      call move_alloc(g2, self%gid)
+      deallocate (self%rho, self%record)
+      allocate (self%rho(cap), self%record(cap))
+      do i = 1, n
+         self%rho(i) = self%scale(i) * self%kinds(self%kind_of(i))%r_out
+      end do
+      self%record = 0
+      self%np = n
+      if (size(self%owner) < cap) then
+         deallocate (self%owner)
+         allocate (self%owner(cap))
+      end if
+      call self%compact()
+      self%held_reach = self%reach
+   contains
+      pure integer function gid_of(kk)
+         integer, intent(in) :: kk
+         if (kk > 0) then
+            gid_of = self%gid(kk)
+         else
+            gid_of = g(-kk)
+         end if
+      end function gid_of
+   end subroutine take_particles
+
+   !> The permutation that sorts v ascending (merge sort; stable).
+   pure function sort_index(v) result(idx)
+      integer, intent(in) :: v(:)
+      integer, allocatable :: idx(:)
+      integer, allocatable :: tmp(:)
+      integer :: n, w, lo, mid, hi, i, j, k
+      n = size(v)
+      allocate (idx(n), tmp(n))
+      do i = 1, n
+         idx(i) = i
+      end do
+      w = 1
+      do while (w < n)
+         lo = 1
+         do while (lo <= n)
+            mid = min(lo + w - 1, n)
+            hi = min(lo + 2 * w - 1, n)
+            i = lo
+            j = mid + 1
+            k = lo
+            do while (i <= mid .and. j <= hi)
+               if (v(idx(j)) < v(idx(i))) then
+                  tmp(k) = idx(j)
+                  j = j + 1
+               else
+                  tmp(k) = idx(i)
+                  i = i + 1
+               end if
+               k = k + 1
+            end do
+            tmp(k:k + mid - i) = idx(i:mid)
+            k = k + mid - i + 1
+            tmp(k:k + hi - j) = idx(j:hi)
+            idx(lo:hi) = tmp(lo:hi)
+            lo = lo + 2 * w
+         end do
+         w = 2 * w
+      end do
+   end function sort_index
+
    !> Grow the particle arrays (double them; by half beyond gentle_growth).
    subroutine grow(self)
       type(packing_type), intent(inout) :: self
@@ -663,5 +899,10 @@ contains
       allocate (g2(n))
       g2(:np) = self%record(:np)
       call move_alloc(g2, self%record)
+      if (allocated(self%gid)) then
+         allocate (g2(n))
+         g2(:np) = self%gid(:np)
+         call move_alloc(g2, self%gid)
+      end if
    end subroutine resize
 end module anm_parking_packing

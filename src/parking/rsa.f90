@@ -148,7 +148,7 @@ contains
       integer :: k, batch_now, nstream0
       logical :: changed
       integer(i8) :: tp1, t1
-      real(wp) :: r_in, seconds
+      real(wp) :: r_in, seconds, reach
       r_in = 0.0_wp
       if (rp%void .or. .not. rp%lazy) then
          call ks%build(pk%kinds, [(k, k=ap%first_kind, ap%first_kind + ap%nkind - 1)], error)
@@ -164,7 +164,13 @@ contains
             call build_ahead(pk, ks, ap, rp, st, run%batch, error)
             if (allocated(error)) return
          end if
-         if (pk%p%nslab > 1) call pk%set_reach(sieve_reach(pk, ap))
+         if (pk%p%nslab > 1) then
+            reach = sieve_reach(pk, ap)
+            ! divided arrays: a reach beyond what the arrays hold needs the other processes'
+            ! particles (every process computes the same reach and held_reach: collective alike)
+            if (pk%p%divided .and. reach > pk%held_reach) call rp%dist%complete_region(pk, reach)
+            call pk%set_reach(reach)
+         end if
          batch_now = run%batch
          ! void placement: a batch crosses an epoch boundary only while the grid is quiet (see
          ! void_epoch)
@@ -201,7 +207,8 @@ contains
          call progress_line(rp, st, run)
       end do
       st%res%reached = st%res%reached .or. st%res%vol >= st%target
-      if (allocated(rp%dist) .and. pk%p%nslab > 1) call rp%dist%note_slab(ap%sieve, count(pk%record(:pk%np) > 0), pk%np)
+      if (allocated(rp%dist) .and. pk%p%nslab > 1) call rp%dist%note_slab(ap%sieve, count(pk%record(:pk%np) > 0), &
+                                                                            pk%ntotal, merge(pk%np, 0, pk%p%divided))
       call sieve_report(rp, st, run, vg, r_in)
    end subroutine park_sieve
 
@@ -309,6 +316,8 @@ contains
       real(wp) :: more
       if (st%res%count < min_count) return
       more = 1.02_wp * max(0.0_wp, st%target - st%res%vol) / (st%res%vol / st%res%count)
+      ! divided arrays: this process holds about its share of what comes
+      if (pk%p%divided) more = more * pk%np / max(1, pk%ntotal)
       call pk%reserve(int(min(real(pk%np, wp) + more + min_count, 0.5_wp * huge(1))))
    end subroutine reserve_ahead
 

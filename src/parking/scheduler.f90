@@ -90,8 +90,8 @@ module anm_parking_scheduler
       procedure(agreed_value), deferred :: agree
       !> The smallest of each value over the processes, in place (collective; spatial mode).
       procedure(agreed_first), deferred :: agree_first
-      !> At the end of a sieve: the particles in this process' cell list and in the packing
-      !> (spatial mode; this default records nothing).
+      !> At the end of a sieve: the particles in this process' cell list, in the packing and in
+      !> this process' arrays (spatial mode; this default records nothing).
       procedure :: note_slab
       !> The processes' sharing of the kinds' building (this default: none, each builds all).
       procedure :: kinds_exchange
@@ -103,6 +103,20 @@ module anm_parking_scheduler
       !> smallest value over the processes, the evaluating one's (this default, one process:
       !> unchanged).
       procedure :: share_outcomes
+      !> Divided particle arrays (collective): make this process' arrays complete for a larger
+      !> reach, from the particles the others own (this default, one process: nothing to do).
+      procedure :: complete_region
+      !> Divided particle arrays, after the parking (collective): the particles in blocks of
+      !> consecutive global ids, block r on process r (this default: unchanged).
+      procedure :: to_blocks
+      !> Whether each entry is true on some process, in place (collective; this default: as is).
+      procedure :: any_over_ranks
+      !> Sums over particles in their global order when each process holds a block of them
+      !> (collective, in two steps around this process' own terms): `running_start` gives the
+      !> sums over the blocks before this one, `running_end` passes them on and returns the
+      !> totals on every process (these defaults, one process: unchanged).
+      procedure :: running_start
+      procedure :: running_end
    end type phase1_distributor_type
 
    abstract interface
@@ -162,6 +176,48 @@ contains
       real(wp), intent(in) :: busy
    end subroutine share_outcomes
 
+   !> Default of `complete_region`: one process holds every particle.
+   subroutine complete_region(self, pk, reach)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+      !> The new reach (mm).
+      real(wp), intent(in) :: reach
+   end subroutine complete_region
+
+   !> Default of `to_blocks`: one process holds every particle, in order.
+   subroutine to_blocks(self, pk)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> This process' packing.
+      type(packing_type), intent(inout) :: pk
+   end subroutine to_blocks
+
+   !> Default of `any_over_ranks`: one process.
+   subroutine any_over_ranks(self, flags)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> This process' flags; on return true where true on some process.
+      logical, intent(inout) :: flags(:)
+   end subroutine any_over_ranks
+
+   !> Default of `running_start`: the first block (the sums stay as given).
+   subroutine running_start(self, sums)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> On return the sums over the particles of the blocks before this process' one.
+      real(wp), intent(inout) :: sums(:)
+   end subroutine running_start
+
+   !> Default of `running_end`: the last block (the sums are the totals).
+   subroutine running_end(self, sums)
+      !> Distributor.
+      class(phase1_distributor_type), intent(in) :: self
+      !> This process' running sums; on return the totals over all blocks.
+      real(wp), intent(inout) :: sums(:)
+   end subroutine running_end
+
    !> Default of `kinds_exchange`: none (every process builds every kind it needs).
    subroutine kinds_exchange(self, kx)
       !> Distributor.
@@ -171,13 +227,15 @@ contains
    end subroutine kinds_exchange
 
    !> Default of `note_slab`: nothing is recorded.
-   subroutine note_slab(self, sieve, nlocal, np)
+   subroutine note_slab(self, sieve, nlocal, np, held)
       !> Distributor.
       class(phase1_distributor_type), intent(in) :: self
       !> Sieve that ended.
       integer, intent(in) :: sieve
-      !> Particles in this process' cell list, and in the packing.
+      !> Particles in this process' cell list, and in the packing (over all processes).
       integer, intent(in) :: nlocal, np
+      !> Divided arrays: particles in this process' arrays (0: not divided).
+      integer, intent(in) :: held
    end subroutine note_slab
 
    !> Phase 1: particles nstream + 1 .. nstream + n of the sieve each find their first attempt that
