@@ -131,13 +131,15 @@ def block_halo(edges: list[float], reach: float) -> float:
 
 def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_share: float | None,
                cores_per_node: int = 64, ranks_per_node: int = 2, efficiency: float = 0.8,
-               decision_share: float = 0.1, reach: float = 0.56, array_bytes: float = 128.0) -> str:
+               decision_share: float = 0.1, reach: float = 0.56, array_bytes: float = 128.0,
+               kinds_mb: float = 0.0) -> str:
     """The scaling model of docs/mpi.md from measured figures: CPU seconds of the job on one rank
     and one thread, the CPU seconds within it that the ranks share when replicated (RSA's phase 1,
     and with the dense strategy the sweeps' trials: `--comm-stats`), its particle count and peak
     memory per rank, and the share of the one-core time that every rank repeats with slabs
     (measured: a rank's CPU outside phase 1 over the one-core CPU; None for the dense strategy,
-    which runs replicated: no slab column)."""
+    which runs replicated: no slab column). `kinds_mb`: the part of the peak that is the particle
+    kinds, which every rank holds whole with slabs (taken as the cube's too)."""
     per_particle = cpu1 / n_ref
     rho = 1.0 - phase1 / cpu1
     volume = 100.0 ** 3
@@ -183,8 +185,10 @@ def projection(cpu1: float, phase1: float, n_ref: int, peak_mb: float, slab_shar
             continue
         t_slab = slab_share * work + (1 - slab_share) * work / spread
         h_slab = 2.0 * reach / (100.0 / ranks)
-        # the particle arrays are divided like the cell lists (each rank: its slab and halo)
-        mem_slab = mem_gb / ranks * (1 + h_slab)
+        # the particle arrays are divided like the cell lists (each rank: its slab and halo); the
+        # kinds are whole on every rank
+        kinds_gb = kinds_mb / 1024.0
+        mem_slab = kinds_gb + max(0.0, mem_gb - kinds_gb) / ranks * (1 + h_slab)
         lines.append(f"| {nodes} | {ranks} x {cores // ranks} | {t_rep / 60:.1f} min | {t_slab / 60:.1f} min | "
                      f"{t_sp / 60:.2f} min | {mem_gb:.0f} GB / {mem_slab:.1f} GB ({h_slab:.2f}) / {mem_sp:.2f} GB "
                      f"({edges} mm, {h:.2f}) |")
@@ -208,13 +212,15 @@ def main() -> int:
     ap.add_argument("--project", type=float, nargs=5,
                     metavar=("CPU", "PHASE1_CPU", "PARTICLES", "PEAK_MB", "SLAB_SHARE"),
                     help="only the scaling model from measured figures (docs/mpi.md)")
+    ap.add_argument("--kinds-mb", type=float, default=0.0,
+                    help="with --project: the part of PEAK_MB that is the particle kinds (whole on every rank)")
     ap.add_argument("--project-dense", type=float, nargs=4, metavar=("CPU", "SHARED_CPU", "PARTICLES", "PEAK_MB"),
                     help="only the scaling model of the dense strategy (replicated; SHARED_CPU: what the ranks "
                          "share, RSA's phase 1 and the sweeps' trials, one-core seconds)")
     args = ap.parse_args()
     if args.project:
         c1, c2, n_ref, peak, share = args.project
-        print(projection(c1, c2, int(n_ref), peak, share))
+        print(projection(c1, c2, int(n_ref), peak, share, kinds_mb=args.kinds_mb))
         return 0
     if args.project_dense:
         c1, c2, n_ref, peak = args.project_dense

@@ -34,7 +34,8 @@ module anm_mpi_distributor
    use mpi_f08, only: MPI_Comm, MPI_Allgather, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE, MPI_Alltoall, MPI_Alltoallv, MPI_LOGICAL, MPI_LOR, MPI_Send, MPI_Recv, &
-                      MPI_Bcast, MPI_STATUS_IGNORE
+                      MPI_Bcast, MPI_STATUS_IGNORE, MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, &
+                      MPI_Comm_free
    implicit none
    private
 
@@ -139,6 +140,7 @@ contains
       logical, intent(in), optional :: replicated
       character(len=32) :: env
       integer :: stat, every
+      type(MPI_Comm) :: node
       dist%comm = comm
       if (present(count)) then
          if (count) then
@@ -149,6 +151,10 @@ contains
       call MPI_Comm_rank(comm, dist%rank)
       call MPI_Comm_size(comm, dist%nranks)
       call MPI_Allreduce(max(1, threads), dist%workers, 1, MPI_INTEGER, MPI_SUM, comm)
+      ! the processes that share this machine's memory
+      call MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, dist%rank, MPI_INFO_NULL, node)
+      call MPI_Comm_size(node, dist%ranks_on_node)
+      call MPI_Comm_free(node)
       dist%writer = dist%rank == 0
       dist%spatial = dist%nranks > 1
       if (present(replicated)) dist%spatial = dist%spatial .and. .not. replicated
@@ -472,6 +478,8 @@ contains
       call MPI_Alltoall(nsend, 1, MPI_INTEGER, nrecv, 1, MPI_INTEGER, self%comm)
       call displacements(nsend, sdis)
       call displacements(nrecv, rdis)
+      ! the cell list goes first: the send buffer takes its place
+      call pk%release()
       allocate (sbuf(particle_doubles * sum(nsend)))
       nsend = 0
       do i = 1, pk%np
@@ -481,7 +489,6 @@ contains
          nsend(q) = nsend(q) + 1
       end do
       deallocate (to)
-      call pk%release()
       deallocate (pk%center, pk%rot, pk%scale, pk%rho, pk%kind_of, pk%sieve, pk%gid, pk%record)
       allocate (rbuf(particle_doubles * sum(nrecv)))
       call MPI_Alltoallv(sbuf, particle_doubles * nsend, particle_doubles * sdis, MPI_DOUBLE_PRECISION, rbuf, &

@@ -319,6 +319,31 @@ def test_mpi_slabs_give_the_serial_model_on_edge_jobs(job, mpi_bin, anm_bin, tmp
         assert cmp.returncode == 0, f"{ranks} ranks {extra}:\n" + cmp.stdout + cmp.stderr
 
 
+def test_mpi_memory_check_counts_the_ranks_on_the_machine(mpi_bin, anm_bin, tmp_path):
+    """`anm run`'s memory check before parking (ANM_MEMORY_LIMIT stands for the memory available)
+    counts every rank on the machine: with a limit the serial estimate fits in but twice it does
+    not, the serial run goes ahead and two replicated ranks on this machine (each holding the
+    whole packing) are refused with the estimate named, before any output is written."""
+    out = tmp_path / "out"
+    out.mkdir()
+    nml = out / "job.nml"
+    nml.write_text(SLAB_NML.format(out=out, **SLAB_JOBS["periodic-shapes-orientations"]))
+    probe = subprocess.run([anm_bin, "run", str(nml)], capture_output=True, text=True, timeout=600,
+                           env=dict(os.environ, ANM_MEMORY_LIMIT="1000"))
+    need = re.search(r"needs about ([\d.]+) (MB|GB|kB)", probe.stderr)
+    assert probe.returncode != 0 and need, probe.stderr
+    scale = {"kB": 1e3, "MB": 1e6, "GB": 1e9}[need.group(2)]
+    limit = str(int(1.5 * float(need.group(1)) * scale))
+    ser = subprocess.run([anm_bin, "run", str(nml)], capture_output=True, text=True, timeout=600,
+                         env=dict(os.environ, ANM_MEMORY_LIMIT=limit, OMP_NUM_THREADS="2"))
+    assert ser.returncode == 0, ser.stderr
+    (out / "model.h5").unlink()
+    (out / "model-summary.csv").unlink()
+    res = run_mpi(mpi_bin, 2, 1, ["run", str(nml), "--replicated"], extra_env={"ANM_MEMORY_LIMIT": limit})
+    assert res.returncode != 0 and "needs about" in res.stdout + res.stderr, res.stdout + res.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["job.nml"]
+
+
 def concrete_fines_nml(shapes_dir, out, box=6.0, nfine=3, first_fraction=0.45, periodic=True):
     """inputs/concrete.nml reduced to a test's size: its `nfine` finest sieves (widths, orders and
     shapes as committed) in a periodic box of `box` mm, the first of them asked for

@@ -17,7 +17,7 @@ module anm_cli_run
    use anm_shapes_library, only: is_shape_file_name
    use anm_config_job, only: run_config_type, read_config
    use anm_config_shells, only: thickness_unit_keyword, shell_mode_name
-   use anm_parking_engine, only: run_parking, particle_kind_type, body_holder
+   use anm_parking_engine, only: run_parking, particle_kind_type, body_holder, particle_share
    use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_summary, only: write_summary, write_summary_csv_file
    use anm_io_model, only: model_type, write_model_file, read_model
@@ -179,6 +179,7 @@ contains
       integer, allocatable :: kind_of(:)
       character(len=:), allocatable :: dir, base, tmp, line
       type(output_set_type) :: set
+      real(wp) :: share
 
       call read_config(path, cfg, error)
       if (allocated(error)) return
@@ -234,7 +235,14 @@ contains
          error%message = path//": &output: directory: "//error%message
          return
       end if
-      call check_run_resources(cfg, error)
+      if (present(dist)) then
+         ! per process: its share of the particles (slabs), times the processes on this node
+         share = 1.0_wp
+         if (dist%spatial) share = particle_share(cfg, dist%nslab)
+         call check_run_resources(cfg, error, share, dist%ranks_on_node)
+      else
+         call check_run_resources(cfg, error)
+      end if
       if (allocated(error)) then
          error%message = path//": "//error%message
          return
@@ -447,12 +455,17 @@ contains
    !> Refuse a run whose memory estimate exceeds the memory available, before parking: particles
    !> (upper estimate from the box volume, the fractions and the smallest particle of each sieve),
    !> particle kinds (shapes times the sieves using them) and synthetic shapes. The message names
-   !> the estimate and the variable to change.
-   subroutine check_run_resources(cfg, error)
+   !> the estimate and the variable to change. The MPI build passes the share of the particles a
+   !> process holds and the processes on this machine, which share its memory.
+   subroutine check_run_resources(cfg, error, share, processes)
       !> Validated configuration.
       type(run_config_type), intent(in) :: cfg
       !> Error naming the estimate and the variable to change.
       type(error_type), allocatable, intent(out) :: error
+      !> Share of the particles one process holds (default 1).
+      real(wp), intent(in), optional :: share
+      !> Processes on this machine (default 1).
+      integer, intent(in), optional :: processes
       real(wp) :: particles, kinds, synth, total
       integer :: s, nsynth
       character(len=:), allocatable :: variable
@@ -472,7 +485,9 @@ contains
       end do
       synth = 0.0_wp
       if (nsynth > 0) synth = shape_memory(real(max(0, cfg%synthetic%count), wp), cfg%synthetic%params%nmax)
+      if (present(share)) particles = particles * share
       total = run_memory_estimate(particles, kinds, cfg%shells%nlayer) + synth
+      if (present(processes)) total = total * max(1, processes)
       if (nsynth > 0 .and. synth + kinds * 5.0e6_wp > 0.5_wp * total) then
          variable = "&synthetic count (= "//to_string(cfg%synthetic%count)//")"
       else

@@ -33,7 +33,7 @@ module anm_parking_engine
    implicit none
    private
 
-   public :: run_parking, particle_kind_type, width_levels, parking_strategy, body_holder
+   public :: run_parking, particle_kind_type, width_levels, parking_strategy, body_holder, particle_share
 
 contains
 
@@ -83,10 +83,7 @@ contains
          if (rp%dist%spatial) then
             pp%nslab = rp%dist%nslab
             pp%slab = rp%dist%slab
-            ! each process holds only its slab's particles and halo, unless void placement (its
-            ! grid is fed every particle on every process) or the VRML file (written by one
-            ! process from every particle) needs them all (docs/mpi.md)
-            pp%divided = pp%nslab > 1 .and. .not. rp%void .and. .not. cfg%output%vrml
+            pp%divided = divides_arrays(cfg, pp%nslab)
          end if
          ! the processes build the kinds in shares and exchange them; the on-disk cache is then
          ! not used (its hits could differ between the processes, which must build the same lists
@@ -142,6 +139,33 @@ contains
       call take_int1(pk%kind_of, pk%np, kind_of)
       call move_alloc(pk%kinds, kinds)
    end subroutine run_parking
+
+   !> Whether slabs divide the particle arrays: each process then holds only its slab's
+   !> particles and halo, unless void placement (its grid is fed every particle on every process)
+   !> or the VRML file (written by one process from every particle) needs them all, or the dense
+   !> strategy runs (replicated; docs/mpi.md).
+   pure logical function divides_arrays(cfg, nslab) result(yes)
+      !> Validated configuration.
+      type(run_config_type), intent(in) :: cfg
+      !> Slabs.
+      integer, intent(in) :: nslab
+      yes = nslab > 1 .and. cfg%parking%placement /= placement%void .and. .not. cfg%output%vrml .and. &
+            cfg%parking%strategy /= parking_strategy%dense
+   end function divides_arrays
+
+   !> Upper estimate of the share of a run's particles that one process holds with `nslab` slabs
+   !> (1 unless they divide the arrays): its slab plus a halo of at most two of the largest widths
+   !> on each face.
+   pure real(wp) function particle_share(cfg, nslab) result(share)
+      !> Validated configuration.
+      type(run_config_type), intent(in) :: cfg
+      !> Slabs (processes).
+      integer, intent(in) :: nslab
+      share = 1.0_wp
+      if (.not. divides_arrays(cfg, nslab)) return
+      share = min(1.0_wp, 1.0_wp / nslab + 4.0_wp * maxval(cfg%sieves%max_width(:cfg%sieves%nsieve)) &
+                                            / cfg%box%length(1))
+   end function particle_share
 
    !> The kinds of the parked particles, each once, in increasing order (divided arrays: of the
    !> particles of every process; collective).

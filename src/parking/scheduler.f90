@@ -82,6 +82,8 @@ module anm_parking_scheduler
       !> This process' rank (0-based) and the number of processes: with replicated data a batch's
       !> members b = rank + 1, rank + 1 + nranks, ... run on this process.
       integer :: rank = 0, nranks = 1
+      !> Processes on this process' machine (they share its memory).
+      integer :: ranks_on_node = 1
    contains
       !> Phase 1 of the batch `at` on every process (collective).
       procedure(distributed_phase1), deferred :: phase1
