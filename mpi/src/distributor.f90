@@ -35,7 +35,7 @@ module anm_mpi_distributor
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE, MPI_Alltoall, MPI_Alltoallv, MPI_LOGICAL, MPI_LOR, MPI_Send, MPI_Recv, &
                       MPI_Bcast, MPI_STATUS_IGNORE, MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, &
-                      MPI_Comm_free
+                      MPI_Comm_free, MPI_Datatype, MPI_Type_contiguous, MPI_Type_commit, MPI_Type_free
    implicit none
    private
 
@@ -406,7 +406,7 @@ contains
       type(packing_type), intent(inout) :: pk
       real(wp), intent(in) :: nb(0:), reach
       integer :: nsend(0:self%nranks - 1), nrecv(0:self%nranks - 1), sdis(0:self%nranks - 1), rdis(0:self%nranks - 1)
-      real(wp), allocatable :: sbuf(:), rbuf(:), x(:, :), rr(:, :, :), sc(:)
+      real(wp), allocatable :: sbuf(:, :), rbuf(:, :), x(:, :), rr(:, :, :), sc(:)
       integer, allocatable :: g(:), kn(:), sv(:)
       integer :: i, q, n, k, nr, pass
       n = self%nranks
@@ -419,21 +419,20 @@ contains
             do q = 0, n - 1
                if (q == self%rank) cycle
                if (.not. near_slab(pk%p, nb(q), nb(q + 1), q, reach, pk%center(1, i), pk%rho(i))) cycle
-               if (pass == 2) call pack_particle(pk, i, sbuf(particle_doubles * (sdis(q) + nsend(q)) + 1:))
+               if (pass == 2) call pack_particle(pk, i, sbuf(:, sdis(q) + nsend(q) + 1))
                nsend(q) = nsend(q) + 1
             end do
          end do
          if (pass == 1) then
             call displacements(nsend, sdis)
-            allocate (sbuf(particle_doubles * sum(nsend)))
+            allocate (sbuf(particle_doubles, sum(nsend)))
          end if
       end do
       call MPI_Alltoall(nsend, 1, MPI_INTEGER, nrecv, 1, MPI_INTEGER, self%comm)
       call displacements(nrecv, rdis)
       nr = sum(nrecv)
-      allocate (rbuf(particle_doubles * nr))
-      call MPI_Alltoallv(sbuf, particle_doubles * nsend, particle_doubles * sdis, MPI_DOUBLE_PRECISION, rbuf, &
-                         particle_doubles * nrecv, particle_doubles * rdis, MPI_DOUBLE_PRECISION, self%comm)
+      allocate (rbuf(particle_doubles, nr))
+      call alltoallv_particles(self, sbuf, nsend, sdis, rbuf, nrecv, rdis)
       deallocate (sbuf)
       if (associated(self%stats)) then
          self%stats%exchanges = self%stats%exchanges + 1
@@ -444,7 +443,7 @@ contains
       pk%reach = reach
       allocate (g(nr), kn(nr), sv(nr), x(3, nr), rr(3, 3, nr), sc(nr))
       do k = 1, nr
-         call unpack_particle(rbuf(particle_doubles * (k - 1) + 1:), g(k), x(:, k), rr(:, :, k), sc(k), kn(k), sv(k))
+         call unpack_particle(rbuf(:, k), g(k), x(:, k), rr(:, :, k), sc(k), kn(k), sv(k))
       end do
       deallocate (rbuf)
       call pk%take_particles(g, x, rr, sc, kn, sv)
@@ -461,7 +460,7 @@ contains
       type(packing_type), intent(inout) :: pk
       integer :: nsend(0:self%nranks - 1), nrecv(0:self%nranks - 1), sdis(0:self%nranks - 1), rdis(0:self%nranks - 1)
       integer, allocatable :: to(:)
-      real(wp), allocatable :: sbuf(:), rbuf(:)
+      real(wp), allocatable :: sbuf(:, :), rbuf(:, :)
       integer :: i, q, n, k, nr, g, lo, hi
       integer(int64) :: ntot
       if (.not. allocated(pk%gid)) return
@@ -480,19 +479,18 @@ contains
       call displacements(nrecv, rdis)
       ! the cell list goes first: the send buffer takes its place
       call pk%release()
-      allocate (sbuf(particle_doubles * sum(nsend)))
+      allocate (sbuf(particle_doubles, sum(nsend)))
       nsend = 0
       do i = 1, pk%np
          q = to(i)
          if (q < 0) cycle
-         call pack_particle(pk, i, sbuf(particle_doubles * (sdis(q) + nsend(q)) + 1:))
+         call pack_particle(pk, i, sbuf(:, sdis(q) + nsend(q) + 1))
          nsend(q) = nsend(q) + 1
       end do
       deallocate (to)
       deallocate (pk%center, pk%rot, pk%scale, pk%rho, pk%kind_of, pk%sieve, pk%gid, pk%record)
-      allocate (rbuf(particle_doubles * sum(nrecv)))
-      call MPI_Alltoallv(sbuf, particle_doubles * nsend, particle_doubles * sdis, MPI_DOUBLE_PRECISION, rbuf, &
-                         particle_doubles * nrecv, particle_doubles * rdis, MPI_DOUBLE_PRECISION, self%comm)
+      allocate (rbuf(particle_doubles, sum(nrecv)))
+      call alltoallv_particles(self, sbuf, nsend, sdis, rbuf, nrecv, rdis)
       deallocate (sbuf)
       nr = sum(nrecv)
       if (associated(self%stats)) self%stats%block_bytes = 8_int64 * particle_doubles * nr
@@ -502,9 +500,9 @@ contains
                 pk%sieve(hi - lo), pk%gid(hi - lo), pk%record(hi - lo))
       pk%record = 0
       do k = 1, nr
-         g = nint(rbuf(particle_doubles * (k - 1) + 1))
+         g = nint(rbuf(1, k))
          i = g - lo
-         call unpack_particle(rbuf(particle_doubles * (k - 1) + 1:), pk%gid(i), pk%center(:, i), pk%rot(:, :, i), &
+         call unpack_particle(rbuf(:, k), pk%gid(i), pk%center(:, i), pk%rot(:, :, i), &
                               pk%scale(i), pk%kind_of(i), pk%sieve(i))
          pk%rho(i) = pk%scale(i) * pk%kinds(pk%kind_of(i))%r_out
       end do
@@ -557,11 +555,26 @@ contains
       call MPI_Bcast(sums, size(sums), MPI_DOUBLE_PRECISION, self%nranks - 1, self%comm)
    end subroutine running_end
 
+   !> The particles of sbuf (nsend(q) of them from column sdis(q) + 1 for process q) to the
+   !> others, rbuf receiving nrecv(q) from process q at column rdis(q) + 1 (collective; one
+   !> MPI_Alltoallv with a datatype of one particle, so that the counts are particles).
+   subroutine alltoallv_particles(self, sbuf, nsend, sdis, rbuf, nrecv, rdis)
+      class(mpi_distributor_type), intent(in) :: self
+      real(wp), intent(in) :: sbuf(:, :)
+      integer, intent(in) :: nsend(0:), sdis(0:), nrecv(0:), rdis(0:)
+      real(wp), intent(inout) :: rbuf(:, :)
+      type(MPI_Datatype) :: particle
+      call MPI_Type_contiguous(particle_doubles, MPI_DOUBLE_PRECISION, particle)
+      call MPI_Type_commit(particle)
+      call MPI_Alltoallv(sbuf, nsend, sdis, particle, rbuf, nrecv, rdis, particle, self%comm)
+      call MPI_Type_free(particle)
+   end subroutine alltoallv_particles
+
    !> Particle i of the packing as `particle_doubles` doubles.
    subroutine pack_particle(pk, i, buf)
       type(packing_type), intent(in) :: pk
       integer, intent(in) :: i
-      real(wp), intent(inout) :: buf(:)
+      real(wp), intent(out) :: buf(particle_doubles)
       buf(1) = real(pk%gid(i), wp)
       buf(2:4) = pk%center(:, i)
       buf(5:13) = reshape(pk%rot(:, :, i), [9])
@@ -572,7 +585,7 @@ contains
 
    !> A particle from `particle_doubles` doubles (pack_particle).
    pure subroutine unpack_particle(buf, g, x, rr, sc, kn, sv)
-      real(wp), intent(in) :: buf(:)
+      real(wp), intent(in) :: buf(particle_doubles)
       integer, intent(out) :: g, kn, sv
       real(wp), intent(out) :: x(3), rr(3, 3), sc
       g = nint(buf(1))
