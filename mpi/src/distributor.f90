@@ -23,7 +23,7 @@
 !>     call new_mpi_distributor(dist, MPI_COMM_WORLD, omp_get_max_threads())
 !>     call run_job(path, output_unit, error_unit, error, threads, dist=dist)
 module anm_mpi_distributor
-   use, intrinsic :: iso_fortran_env, only: int8, int64
+   use, intrinsic :: iso_fortran_env, only: int8, int64, error_unit
    use anm_core_kinds, only: wp
    use anm_parking_attempts, only: attempt_type, attempt_params_type
    use anm_parking_packing, only: packing_type, near_slab
@@ -35,7 +35,8 @@ module anm_mpi_distributor
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE, MPI_Alltoall, MPI_Alltoallv, MPI_LOGICAL, MPI_LOR, MPI_Send, MPI_Recv, &
                       MPI_Bcast, MPI_STATUS_IGNORE, MPI_Comm_split_type, MPI_COMM_TYPE_SHARED, MPI_INFO_NULL, &
-                      MPI_Comm_free, MPI_Datatype, MPI_Type_contiguous, MPI_Type_commit, MPI_Type_free
+                      MPI_Comm_free, MPI_Datatype, MPI_Type_contiguous, MPI_Type_commit, MPI_Type_free, &
+                      MPI_Abort
    implicit none
    private
 
@@ -496,6 +497,12 @@ contains
       if (associated(self%stats)) self%stats%block_bytes = 8_int64 * particle_doubles * nr
       lo = int(ntot * self%rank / n)
       hi = int(ntot * (self%rank + 1) / n)
+      ! every particle has exactly one owner: a block short or long is a bug, not a user's error
+      if (nr /= hi - lo) then
+         write (error_unit, '(a,i0,a,i0,a,i0)') "anm: internal error: rank ", self%rank, " received ", nr, &
+            " particles for its block of ", hi - lo
+         call MPI_Abort(self%comm, 70)
+      end if
       allocate (pk%center(3, hi - lo), pk%rot(3, 3, hi - lo), pk%scale(hi - lo), pk%rho(hi - lo), pk%kind_of(hi - lo), &
                 pk%sieve(hi - lo), pk%gid(hi - lo), pk%record(hi - lo))
       pk%record = 0

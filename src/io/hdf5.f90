@@ -330,17 +330,18 @@ contains
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
       integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(rank(x))
-      integer :: st
+      integer(hsize_t) :: dims(1)
+      integer :: st, st2
       dims = shape(x, hsize_t)
-      if (present(total)) dims(rank(x)) = total
+      if (present(total)) dims(1) = total
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         call select_part(file, space, dims, split, st, offset, size(x, 1, i8), mspace)
          if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
-         if (mspace /= space) call h5sclose_f(mspace, st)
+         ! a failed selection or write keeps its status
+         if (mspace /= space) call h5sclose_f(mspace, st2)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
@@ -355,17 +356,18 @@ contains
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
       integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(rank(x))
-      integer :: st
+      integer(hsize_t) :: dims(2)
+      integer :: st, st2
       dims = shape(x, hsize_t)
-      if (present(total)) dims(rank(x)) = total
+      if (present(total)) dims(2) = total
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         call select_part(file, space, dims, split, st, offset, size(x, 2, i8), mspace)
          if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
-         if (mspace /= space) call h5sclose_f(mspace, st)
+         ! a failed selection or write keeps its status
+         if (mspace /= space) call h5sclose_f(mspace, st2)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
@@ -380,17 +382,18 @@ contains
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
       integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(rank(x))
-      integer :: st
+      integer(hsize_t) :: dims(3)
+      integer :: st, st2
       dims = shape(x, hsize_t)
-      if (present(total)) dims(rank(x)) = total
+      if (present(total)) dims(3) = total
       call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         call select_part(file, space, dims, split, st, offset, size(x, 3, i8), mspace)
          if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
-         if (mspace /= space) call h5sclose_f(mspace, st)
+         ! a failed selection or write keeps its status
+         if (mspace /= space) call h5sclose_f(mspace, st2)
       else
          call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
       end if
@@ -405,17 +408,18 @@ contains
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
       integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(rank(x))
-      integer :: st
+      integer(hsize_t) :: dims(1)
+      integer :: st, st2
       dims = shape(x, hsize_t)
-      if (present(total)) dims(rank(x)) = total
+      if (present(total)) dims(1) = total
       call make_dataset(file, path, H5T_NATIVE_INTEGER, dims, dset, space, error)
       if (allocated(error)) return
       if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, rank(x), i8), mspace)
+         call select_part(file, space, dims, split, st, offset, size(x, 1, i8), mspace)
          if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st, mem_space_id=mspace, &
                                       file_space_id=space, xfer_prp=file%dxpl)
-         if (mspace /= space) call h5sclose_f(mspace, st)
+         ! a failed selection or write keeps its status
+         if (mspace /= space) call h5sclose_f(mspace, st2)
       else
          call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
       end if
@@ -456,7 +460,10 @@ contains
          mdims = dims
          mdims(size(dims)) = max(1_i8, held)
          call h5screate_simple_f(size(dims), mdims, mspace, st)
-         if (st /= 0) return
+         if (st /= 0) then
+            mspace = space
+            return
+         end if
          if (held == 0) call h5sselect_none_f(mspace, st)
       else
          lo = n * file%rank / file%nranks

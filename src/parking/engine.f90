@@ -153,9 +153,10 @@ contains
             cfg%parking%strategy /= parking_strategy%dense
    end function divides_arrays
 
-   !> Upper estimate of the share of a run's particles that one process holds with `nslab` slabs
-   !> (1 unless they divide the arrays): its slab plus a halo of at most two of the largest widths
-   !> on each face.
+   !> Estimate of the share of a run's particles that one process holds with `nslab` slabs (1
+   !> unless they divide the arrays): its slab plus a halo of three of the largest widths on each
+   !> face (the halo is the largest bounding radius plus each particle's own: a grain three times
+   !> as long as its sieve width reaches that far).
    pure real(wp) function particle_share(cfg, nslab) result(share)
       !> Validated configuration.
       type(run_config_type), intent(in) :: cfg
@@ -163,7 +164,7 @@ contains
       integer, intent(in) :: nslab
       share = 1.0_wp
       if (.not. divides_arrays(cfg, nslab)) return
-      share = min(1.0_wp, 1.0_wp / nslab + 4.0_wp * maxval(cfg%sieves%max_width(:cfg%sieves%nsieve)) &
+      share = min(1.0_wp, 1.0_wp / nslab + 6.0_wp * maxval(cfg%sieves%max_width(:cfg%sieves%nsieve)) &
                                             / cfg%box%length(1))
    end function particle_share
 

@@ -131,8 +131,6 @@ module anm_parking_packing
       procedure :: set_slab
       !> This process' slab [lo, hi) along x.
       procedure :: slab_bounds
-      !> Global id of particle i.
-      procedure :: global_id
       !> Add particles parked by other processes to the arrays (divided arrays).
       procedure :: take_particles
    end type packing_type
@@ -214,7 +212,8 @@ contains
       end if
    end subroutine insert_record
 
-   !> Remove particle i; the last particle takes id i.
+   !> Remove particle i; the last particle takes id i (not for divided arrays, whose global ids
+   !> must stay ascending: the dense strategy, which removes, never divides them).
    subroutine remove(self, i)
       !> Packing.
       class(packing_type), intent(inout) :: self
@@ -271,7 +270,11 @@ contains
       !> Packing.
       class(packing_type), intent(inout) :: self
       integer :: i
-      if (allocated(self%gid)) call drop_out_of_reach(self, 1)
+      if (allocated(self%gid)) then
+         ! the cell list is rebuilt below: the dropped particles need not leave it
+         self%record(:self%np) = 0
+         call drop_out_of_reach(self, 1)
+      end if
       call new_cell_list(self%cl, self%p%box, self%p%periodic, self%p%rho_min, capacity=max(initial_capacity, self%np))
       self%nrecord = 0
       self%ndead = 0
@@ -473,7 +476,8 @@ contains
       logical :: grown
       grown = r > self%reach
       self%reach = r
-      if (grown .and. self%p%nslab > 1 .and. self%np > 0) call self%compact()
+      ! (divided arrays: also with none held, so that held_reach stays the same on every process)
+      if (grown .and. self%p%nslab > 1 .and. (self%np > 0 .or. allocated(self%gid))) call self%compact()
    end subroutine set_reach
 
    !> No overlap of a particle of kind kn at pose (x, rr, sc) with the walls (non-periodic) or any
@@ -703,16 +707,6 @@ contains
       end if
       near = d <= (reach + rho) * (1.0_wp + 1.0e-9_wp) + 1.0e-9_wp * lx
    end function near_slab
-
-   !> Global id of particle i (its place in the order of parking over all processes).
-   pure integer function global_id(self, i) result(g)
-      !> Packing.
-      class(packing_type), intent(in) :: self
-      !> Particle (1..np).
-      integer, intent(in) :: i
-      g = i
-      if (allocated(self%gid)) g = self%gid(i)
-   end function global_id
 
    !> Divided arrays: add particles parked earlier and held by other processes (global ids
    !> g(k), centres x(:, k), rotations rr(:, :, k), scales sc(k), kinds kn(k), sieves sv(k));

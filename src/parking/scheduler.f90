@@ -118,6 +118,7 @@ module anm_parking_scheduler
       !> sums over the blocks before this one, `running_end` passes them on and returns the
       !> totals on every process (these defaults, one process: unchanged).
       procedure :: running_start
+      !> The second step of those sums (see `running_start`).
       procedure :: running_end
    end type phase1_distributor_type
 
