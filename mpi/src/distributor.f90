@@ -31,6 +31,7 @@ module anm_mpi_distributor
    use anm_parking_scheduler, only: phase1_distributor_type, run_phase1, spatial_search
    use anm_parking_kinds, only: kind_exchange_type
    use anm_mpi_kinds, only: mpi_kinds_type, new_mpi_kinds
+   use anm_io_hdf5, only: block_start
    use mpi_f08, only: MPI_Comm, MPI_Allgather, MPI_Allgatherv, MPI_Allreduce, MPI_Comm_rank, MPI_Comm_size, MPI_BYTE, &
                       MPI_DOUBLE_PRECISION, MPI_INTEGER, MPI_INTEGER8, MPI_MAX, MPI_SUM, MPI_MIN, MPI_Wtime, &
                       MPI_IN_PLACE, MPI_Alltoall, MPI_Alltoallv, MPI_LOGICAL, MPI_LOR, MPI_Send, MPI_Recv, &
@@ -495,8 +496,8 @@ contains
       deallocate (sbuf)
       nr = sum(nrecv)
       if (associated(self%stats)) self%stats%block_bytes = 8_int64 * particle_doubles * nr
-      lo = int(ntot * self%rank / n)
-      hi = int(ntot * (self%rank + 1) / n)
+      lo = int(block_start(ntot, self%rank, n))
+      hi = int(block_start(ntot, self%rank + 1, n))
       ! every particle has exactly one owner: a block short or long is a bug, not a user's error
       if (nr /= hi - lo) then
          write (error_unit, '(a,i0,a,i0,a,i0)') "anm: internal error: rank ", self%rank, " received ", nr, &
@@ -520,10 +521,10 @@ contains
          integer, intent(in) :: gg
          r = int((int(gg - 1, int64) * n) / ntot)
          ! the blocks' bounds round down: step to the block that holds gg
-         do while (r > 0 .and. gg <= ntot * r / n)
+         do while (r > 0 .and. gg <= block_start(ntot, r, n))
             r = r - 1
          end do
-         do while (r < n - 1 .and. gg > ntot * (r + 1) / n)
+         do while (r < n - 1 .and. gg > block_start(ntot, r + 1, n))
             r = r + 1
          end do
       end function block_of

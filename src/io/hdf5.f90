@@ -23,7 +23,7 @@ module anm_io_hdf5
    private
 
    public :: h5_file_type, h5_create, h5_open_read, h5_close, h5_group, h5_write, h5_write_attr, h5_read, &
-      & h5_read_attr, h5_dims, h5_exists, h5_read_strings, h5_parallel_type
+      & h5_read_attr, h5_dims, h5_exists, h5_read_strings, h5_parallel_type, block_start
 
    !> The processes that write one file together (parallel HDF5, MPI-IO): the MPI build extends it
    !> (mpi/src/output.f90); the serial program uses none. Every process makes the same calls with
@@ -82,6 +82,13 @@ module anm_io_hdf5
       integer :: rank = 0, nranks = 1
       integer(hid_t) :: dxpl = -1
    end type h5_file_type
+
+   !> A dataset being written: its handles, the memory and file dataspaces and the transfer list of
+   !> this process' part, and the status so far (`start_write`, `end_write`).
+   type :: dataset_write_type
+      integer(hid_t) :: dset = -1, space = -1, mspace = -1, fspace = -1, xfer = -1
+      integer :: st = 0
+   end type dataset_write_type
 
    !> A string read from a file.
    type :: h5_text_type
@@ -322,6 +329,49 @@ contains
       if (st /= 0) call fail(error, file, path, "write failed")
    end subroutine finish
 
+   !> Create dataset `path` for an array of shape `xshape` (its last dimension `total` when
+   !> given) and select what this process writes (`select_part` in a parallel file; all
+   !> otherwise): the handles and the status in w.
+   subroutine start_write(file, path, dtype, xshape, w, error, split, offset, total)
+      use hdf5, only: H5S_ALL_F, H5P_DEFAULT_F
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      integer(hid_t), intent(in) :: dtype
+      integer(hsize_t), intent(in) :: xshape(:)
+      type(dataset_write_type), intent(out) :: w
+      type(error_type), allocatable, intent(out) :: error
+      logical, intent(in), optional :: split
+      integer(i8), intent(in), optional :: offset, total
+      integer(hsize_t) :: dims(size(xshape))
+      dims = xshape
+      if (present(total)) dims(size(dims)) = total
+      call make_dataset(file, path, dtype, dims, w%dset, w%space, error)
+      if (allocated(error)) return
+      w%st = 0
+      if (file%parallel) then
+         call select_part(file, w%space, dims, split, w%st, offset, int(xshape(size(xshape)), i8), w%mspace)
+         w%fspace = w%space
+         w%xfer = file%dxpl
+      else
+         w%mspace = H5S_ALL_F
+         w%fspace = H5S_ALL_F
+         w%xfer = H5P_DEFAULT_F
+      end if
+   end subroutine start_write
+
+   !> Close what `start_write` opened; an error when the selection or the write failed.
+   subroutine end_write(file, path, w, error)
+      use hdf5, only: H5S_ALL_F
+      type(h5_file_type), intent(in) :: file
+      character(len=*), intent(in) :: path
+      type(dataset_write_type), intent(in) :: w
+      type(error_type), allocatable, intent(out) :: error
+      integer :: s2
+      ! a failed selection or write keeps its status
+      if (w%mspace /= w%space .and. w%mspace /= H5S_ALL_F) call h5sclose_f(w%mspace, s2)
+      call finish(file, path, w%st, w%dset, w%space, error)
+   end subroutine end_write
+
    subroutine write_real1(file, path, x, error, split, offset, total)
       type(h5_file_type), intent(in) :: file
       character(len=*), intent(in) :: path
@@ -329,23 +379,12 @@ contains
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
-      integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(1)
-      integer :: st, st2
-      dims = shape(x, hsize_t)
-      if (present(total)) dims(1) = total
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
+      type(dataset_write_type) :: w
+      call start_write(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), w, error, split, offset, total)
       if (allocated(error)) return
-      if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, 1, i8), mspace)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
-                                      file_space_id=space, xfer_prp=file%dxpl)
-         ! a failed selection or write keeps its status
-         if (mspace /= space) call h5sclose_f(mspace, st2)
-      else
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
-      end if
-      call finish(file, path, st, dset, space, error)
+      if (w%st == 0) call h5dwrite_f(w%dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), w%st, mem_space_id=w%mspace, &
+                                     file_space_id=w%fspace, xfer_prp=w%xfer)
+      call end_write(file, path, w, error)
    end subroutine write_real1
 
    subroutine write_real2(file, path, x, error, split, offset, total)
@@ -355,23 +394,12 @@ contains
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
-      integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(2)
-      integer :: st, st2
-      dims = shape(x, hsize_t)
-      if (present(total)) dims(2) = total
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
+      type(dataset_write_type) :: w
+      call start_write(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), w, error, split, offset, total)
       if (allocated(error)) return
-      if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, 2, i8), mspace)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
-                                      file_space_id=space, xfer_prp=file%dxpl)
-         ! a failed selection or write keeps its status
-         if (mspace /= space) call h5sclose_f(mspace, st2)
-      else
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
-      end if
-      call finish(file, path, st, dset, space, error)
+      if (w%st == 0) call h5dwrite_f(w%dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), w%st, mem_space_id=w%mspace, &
+                                     file_space_id=w%fspace, xfer_prp=w%xfer)
+      call end_write(file, path, w, error)
    end subroutine write_real2
 
    subroutine write_real3(file, path, x, error, split, offset, total)
@@ -381,23 +409,12 @@ contains
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
-      integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(3)
-      integer :: st, st2
-      dims = shape(x, hsize_t)
-      if (present(total)) dims(3) = total
-      call make_dataset(file, path, H5T_NATIVE_DOUBLE, dims, dset, space, error)
+      type(dataset_write_type) :: w
+      call start_write(file, path, H5T_NATIVE_DOUBLE, shape(x, hsize_t), w, error, split, offset, total)
       if (allocated(error)) return
-      if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, 3, i8), mspace)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st, mem_space_id=mspace, &
-                                      file_space_id=space, xfer_prp=file%dxpl)
-         ! a failed selection or write keeps its status
-         if (mspace /= space) call h5sclose_f(mspace, st2)
-      else
-         call h5dwrite_f(dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), st)
-      end if
-      call finish(file, path, st, dset, space, error)
+      if (w%st == 0) call h5dwrite_f(w%dset, H5T_NATIVE_DOUBLE, x, shape(x, hsize_t), w%st, mem_space_id=w%mspace, &
+                                     file_space_id=w%fspace, xfer_prp=w%xfer)
+      call end_write(file, path, w, error)
    end subroutine write_real3
 
    subroutine write_int1(file, path, x, error, split, offset, total)
@@ -407,23 +424,12 @@ contains
       type(error_type), allocatable, intent(out) :: error
       logical, intent(in), optional :: split
       integer(i8), intent(in), optional :: offset, total
-      integer(hid_t) :: dset, space, mspace
-      integer(hsize_t) :: dims(1)
-      integer :: st, st2
-      dims = shape(x, hsize_t)
-      if (present(total)) dims(1) = total
-      call make_dataset(file, path, H5T_NATIVE_INTEGER, dims, dset, space, error)
+      type(dataset_write_type) :: w
+      call start_write(file, path, H5T_NATIVE_INTEGER, shape(x, hsize_t), w, error, split, offset, total)
       if (allocated(error)) return
-      if (file%parallel) then
-         call select_part(file, space, dims, split, st, offset, size(x, 1, i8), mspace)
-         if (st == 0) call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st, mem_space_id=mspace, &
-                                      file_space_id=space, xfer_prp=file%dxpl)
-         ! a failed selection or write keeps its status
-         if (mspace /= space) call h5sclose_f(mspace, st2)
-      else
-         call h5dwrite_f(dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), st)
-      end if
-      call finish(file, path, st, dset, space, error)
+      if (w%st == 0) call h5dwrite_f(w%dset, H5T_NATIVE_INTEGER, x, shape(x, hsize_t), w%st, mem_space_id=w%mspace, &
+                                     file_space_id=w%fspace, xfer_prp=w%xfer)
+      call end_write(file, path, w, error)
    end subroutine write_int1
 
    !> This process' part of a dataset of shape `dims` written in parallel, selected in the file
@@ -466,8 +472,8 @@ contains
          end if
          if (held == 0) call h5sselect_none_f(mspace, st)
       else
-         lo = n * file%rank / file%nranks
-         hi = n * (file%rank + 1) / file%nranks
+         lo = block_start(int(n, i8), file%rank, file%nranks)
+         hi = block_start(int(n, i8), file%rank + 1, file%nranks)
       end if
       if (hi <= lo) then
          call h5sselect_none_f(space, st)
@@ -479,6 +485,17 @@ contains
       count(size(dims)) = hi - lo
       call h5sselect_hyperslab_f(space, H5S_SELECT_SET_F, start, count, st)
    end subroutine select_part
+
+   !> Where process r's block of n entries split over nranks processes starts (0-based): n r /
+   !> nranks, rounded down; block r is start(r) + 1 .. start(r + 1) (the datasets written with
+   !> `split`, and the MPI build's particles by global id).
+   pure integer(i8) function block_start(n, r, nranks) result(lo)
+      !> Entries.
+      integer(i8), intent(in) :: n
+      !> Process (0 .. nranks; nranks gives n) and processes.
+      integer, intent(in) :: r, nranks
+      lo = n * r / max(1, nranks)
+   end function block_start
 
    subroutine string_type(len, dtype)
       integer, intent(in) :: len

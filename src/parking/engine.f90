@@ -29,6 +29,7 @@ module anm_parking_engine
    use anm_parking_scheduler, only: phase1_distributor_type
    use anm_parking_dense, only: park_dense, dense_params_type
    use anm_io_model, only: model_type
+   use anm_io_hdf5, only: block_start
    use omp_lib, only: omp_get_max_threads
    implicit none
    private
@@ -135,7 +136,7 @@ contains
       model%attempts = run%attempts
       model%wall_time = real(t1 - run%t0, wp) / run%rate
       call fill_model(cfg, pk, result, model)
-      if (pk%p%divided) model%first = int(int(pk%ntotal, i8) * rp%dist%rank / rp%dist%nranks)
+      if (pk%p%divided) model%first = int(block_start(int(pk%ntotal, i8), rp%dist%rank, rp%dist%nranks))
       call take_int1(pk%kind_of, pk%np, kind_of)
       call move_alloc(pk%kinds, kinds)
    end subroutine run_parking
